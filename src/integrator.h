@@ -1,0 +1,90 @@
+// integrator.h: light transport estimates shared by the lightmap and probe bakers.
+//
+// A unidirectional path tracer with next-event estimation:
+//   - punctual lights (KHR_lights_punctual) with hard or soft shadows (shadowRadius,
+//     shadowAngle, shadowSamples), glTF spot falloff and range window (MISSION.md);
+//   - emissive triangles, chosen in proportion to their power and sampled by area;
+//   - the sky (constant or an importance-sampled equirectangular map);
+// emissive triangles and the sky are combined with cosine-weighted BSDF sampling by
+// multiple importance sampling (power heuristic). Surfaces are Lambertian with the bounce
+// albedo of Scene::bounceAlbedoAt, raised to 1/albedoBoost. Back faces of single-sided
+// materials reflect nothing (they are the inside of geometry). Paths continue with cosine
+// sampling and Russian roulette up to maxBounces.
+//
+// Units: irradiance E in W/m^2 (lux in glTF's photometric reading, no 683 factor);
+// radiance L in W/(m^2 sr). A lightmap texel stores E / pi.
+// Determinism: every estimate is a pure function of its arguments (see sampling.h).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "src/math.h"
+#include "src/scene.h"
+#include "src/tracer.h"
+
+namespace kiln {
+
+struct IntegratorSettings {
+  int maxBounces = 4;            // bounces of indirect light; 0 = direct light only
+  int russianRouletteDepth = 2;  // bounces before Russian roulette starts
+  float albedoBoost = 1.0f;      // albedo' = pow(albedo, 1 / albedoBoost)
+  float indirectIntensity = 1.0f;  // multiplies all indirect light
+  // Per scene light: whether its unbounced light is included (direct) and whether its
+  // light is included after bouncing (indirect). Empty = every light that is not realtime.
+  std::vector<bool> directLights;
+  std::vector<bool> indirectLights;
+  bool includeSky = true;
+  bool includeEmissive = true;
+};
+
+// An estimate split into the light that arrives without bouncing and the rest.
+struct LightingEstimate {
+  vec3 direct{0.0f};    // straight from lights, emissive surfaces or the sky
+  vec3 indirect{0.0f};  // after one or more bounces (already x indirectIntensity)
+  vec3 total() const { return direct + indirect; }
+};
+
+// A punctual light's contribution at a point, as a delta in direction.
+struct DeltaLight {
+  uint32_t light = 0;    // index into Scene::lights
+  vec3 direction{0.0f};  // unit, towards the light
+  vec3 irradiance{0.0f};  // on a surface facing the light, x visibility (mean of shadow rays)
+};
+
+class Integrator {
+ public:
+  // `scene` and `tracer` must outlive the Integrator.
+  Integrator(const Scene& scene, const Tracer& tracer, IntegratorSettings settings = {});
+
+  // Irradiance E at point p on a surface with unit normal n (the side light arrives from),
+  // averaged over samples [firstSample, firstSample + sampleCount) of the stream `key`.
+  // p should already lie outside geometry; rays leave from p offset along n.
+  LightingEstimate irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
+                              uint32_t sampleCount) const;
+
+  // Radiance arriving at p from unit direction `dir` (one path, sample `sampleIndex` of
+  // stream `key`): direct = emission seen along the ray (sky, emissive surface); indirect =
+  // light reflected towards p by the first surface hit. Punctual lights are deltas and are
+  // never hit: add them with punctualLights().
+  LightingEstimate incomingRadiance(vec3 p, vec3 dir, uint64_t key, uint32_t sampleIndex) const;
+
+  // The punctual lights selected by settings.directLights at p, with visibility (averaged
+  // over each light's shadowSamples; soft shadows jittered by sample `sampleIndex` of
+  // stream `key`). Appends to `out`.
+  void punctualLights(vec3 p, uint64_t key, uint32_t sampleIndex,
+                      std::vector<DeltaLight>& out) const;
+
+  const IntegratorSettings& settings() const { return settings_; }
+  const Scene& scene() const { return scene_; }
+  const Tracer& tracer() const { return tracer_; }
+
+ private:
+  struct EmitterTable;
+  const Scene& scene_;
+  const Tracer& tracer_;
+  IntegratorSettings settings_;
+  std::shared_ptr<const EmitterTable> emitters_;
+};
+
+}  // namespace kiln

@@ -1,0 +1,66 @@
+// tracer.h: ray queries against a Scene through Embree 3.
+//
+// The Embree scene is built once (one triangle geometry per Object, geometry ID = object
+// index) and is immutable afterwards; every query is const and thread-safe.
+// Materials act on rays as follows:
+//   - alphaMode MASK: a hit where baseColor alpha (factor x texture at UV0) < alphaCutoff is
+//     ignored by every query (Embree intersection and occlusion filter functions);
+//   - alphaMode BLEND: a surface for intersect() and occluded(); transmittance() lets light
+//     through it, multiplied by (1 - alpha) x baseColor.rgb (coloured transparency, as
+//     Beast's RGB transparency did);
+//   - everything else is an opaque surface, both faces.
+#pragma once
+
+#include <memory>
+#include <optional>
+
+#include "src/math.h"
+#include "src/result.h"
+#include "src/scene.h"
+
+namespace kiln {
+
+struct Ray {
+  vec3 origin;
+  vec3 direction;  // need not be unit length; t is in units of |direction|
+  float tMin = 0.0f;
+  float tMax = kInfinity;
+};
+
+struct Hit {
+  float t = 0.0f;
+  uint32_t object = 0;    // index into Scene::objects
+  uint32_t triangle = 0;  // index into Object::triangles
+  vec2 bary{0.0f};        // (b1, b2): p = (1-b1-b2) p0 + b1 p1 + b2 p2
+  vec3 geometricNormal{0.0f};  // unit, the triangle's front side (CCW)
+  bool backFace = false;       // the ray arrived at the back side: dot(direction, Ng) > 0
+};
+
+class Tracer {
+ public:
+  // Builds the acceleration structure. `scene` must outlive the Tracer.
+  static Result<std::unique_ptr<Tracer>> create(const Scene& scene);
+  ~Tracer();
+  Tracer(const Tracer&) = delete;
+  Tracer& operator=(const Tracer&) = delete;
+
+  // Closest hit in (tMin, tMax), or nothing.
+  std::optional<Hit> intersect(const Ray& ray) const;
+  // True when anything (including BLEND surfaces) lies in (tMin, tMax).
+  bool occluded(const Ray& ray) const;
+  // Fraction of light that passes along the segment: 0 when an opaque surface lies in
+  // (tMin, tMax), else the product over the BLEND surfaces crossed.
+  vec3 transmittance(const Ray& ray) const;
+
+  bool hasTranslucentSurfaces() const { return hasBlend_; }
+  const Scene& scene() const { return scene_; }
+
+ private:
+  explicit Tracer(const Scene& scene);
+  struct Impl;
+  const Scene& scene_;
+  std::unique_ptr<Impl> impl_;
+  bool hasBlend_ = false;
+};
+
+}  // namespace kiln
