@@ -84,4 +84,21 @@ struct ShL2Rgb {
   }
 };
 
+// L1 spherical harmonics of RGB radiance: bands 0-1 of ShL2Rgb (coefficients 0-3, same basis
+// and convention). Cheaper (4 instead of 9 coefficients) and blurrier: L1 irradiance keeps
+// A0 and A1 only, E(n) = A0 c0 Y00 + A1 sum_{i=1..3} c_i Y_i(n).
+struct ShL1Rgb {
+  std::array<glm::vec3, kShL1Count> c{};
+
+  // Reconstructed radiance in direction d.
+  glm::vec3 evaluate(glm::vec3 d) const {
+    return c[0] * 0.282095f + (c[1] * d.y + c[2] * d.z + c[3] * d.x) * 0.488603f;
+  }
+  // Irradiance E (not E / pi) on a surface with unit normal n.
+  glm::vec3 irradiance(glm::vec3 n) const {
+    return c[0] * (kShCosineLobe[0] * 0.282095f) +
+           (c[1] * n.y + c[2] * n.z + c[3] * n.x) * (kShCosineLobe[1] * 0.488603f);
+  }
+};
+
 }  // namespace kiln
