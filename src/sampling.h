@@ -70,7 +70,10 @@ class Distribution1D {
   // Picks a bin with probability weight / total; `remapped` returns u rescaled to [0,1)
   // within the bin. Returns the bin index.
   size_t sampleDiscrete(float u, float* pmf = nullptr, float* remapped = nullptr) const;
-  float pmf(size_t bin) const { return total_ > 0 ? weights_[bin] / total_ : 0.0f; }
+  // All-zero weights sample uniformly, so the pmf is then 1 / size().
+  float pmf(size_t bin) const {
+    return total_ > 0 ? weights_[bin] / total_ : 1.0f / float(weights_.size());
+  }
   // Continuous sample in [0,1) with density pdf (relative to [0,1)).
   float sampleContinuous(float u, float* pdf, size_t* bin = nullptr) const;
 

@@ -41,7 +41,7 @@ class Sky {
   struct Sample {
     vec3 direction;  // unit, towards the sky
     vec3 radiance;
-    float pdf;  // solid angle
+    float pdf;  // solid angle; 0 only for a degenerate sample exactly at a pole (skip it)
   };
   // Importance-samples a direction (by the map's luminance x sin(theta); uniform sphere for
   // a constant sky).
