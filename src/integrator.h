@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "src/math.h"
+#include "src/sampling.h"
 #include "src/scene.h"
 #include "src/tracer.h"
 
@@ -32,6 +33,8 @@ struct IntegratorSettings {
   float indirectIntensity = 1.0f;  // multiplies all indirect light
   // Per scene light: whether its unbounced light is included (direct) and whether its
   // light is included after bouncing (indirect). Empty = every light that is not realtime.
+  // Integrator::settings() returns them resolved: one entry per scene light (entries
+  // missing from a shorter vector are false).
   std::vector<bool> directLights;
   std::vector<bool> indirectLights;
   bool includeSky = true;
@@ -75,16 +78,44 @@ class Integrator {
   void punctualLights(vec3 p, uint64_t key, uint32_t sampleIndex,
                       std::vector<DeltaLight>& out) const;
 
+  // Visibility of scene light `light` from p (shadow rays leave p offset along unit n; pass
+  // n = 0 for a point in free space such as a probe): the mean transmittance (rgb, 1 =
+  // unoccluded) over the light's shadowSamples rays, jittered by sample `sampleIndex` of
+  // stream `key` when the light has soft shadows. Ignores the light's falloff, cone and the
+  // light selection (for shadowmask and probe occlusion of mixed lights).
+  vec3 lightVisibility(vec3 p, vec3 n, uint32_t light, uint64_t key, uint32_t sampleIndex) const;
+
+  // Rays (shadow, continuation and first rays) traced by Integrator calls on the calling
+  // thread since the thread started. A plain thread-local counter, for benchmarks; read it
+  // before and after a batch of work on one thread.
+  static uint64_t threadRayCount();
+
   const IntegratorSettings& settings() const { return settings_; }
   const Scene& scene() const { return scene_; }
   const Tracer& tracer() const { return tracer_; }
 
  private:
   struct EmitterTable;
+  enum class ShadowKind { Any, Hard, Soft };
+  // Helpers, defined and documented in integrator.cpp.
+  vec3 transmittance(vec3 origin, vec3 direction, float tMax) const;
+  vec3 visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_t firstIndex, uint32_t rays,
+                    uint32_t dimension) const;
+  vec3 punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, ShadowKind kind, uint64_t key,
+                          uint32_t sampleIndex, uint32_t vertex) const;
+  vec3 sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uPoint) const;
+  vec3 sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u) const;
+  float emitterPdf(uint32_t object, uint32_t triangle, float distance2, float cosLight) const;
+  vec3 albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const;
+  void tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,
+                 vec3& indirect) const;
+
   const Scene& scene_;
   const Tracer& tracer_;
   IntegratorSettings settings_;
   std::shared_ptr<const EmitterTable> emitters_;
+  bool sampleEmissive_ = false;  // emitter NEE runs (includeEmissive and emitters exist)
+  bool sampleSky_ = false;       // sky NEE runs (includeSky and the sky is not black)
 };
 
 }  // namespace kiln
