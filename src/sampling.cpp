@@ -74,13 +74,28 @@ struct SobolMatrix {
     }
   }
 };
-constexpr SobolMatrix kSobolDim1;
+
+// The matrix-vector product over GF(2) is linear in the index's bits, so it splits into the
+// XOR of four byte-indexed tables: table[b][k] = product of byte k placed at byte position b.
+// This replaces a 32-step loop with unpredictable branches on the integrator's hot path.
+struct SobolTables {
+  uint32_t table[4][256];
+  constexpr SobolTables() : table() {
+    constexpr SobolMatrix m;
+    for (int b = 0; b < 4; ++b)
+      for (uint32_t k = 0; k < 256; ++k) {
+        uint32_t x = 0;
+        for (int j = 0; j < 8; ++j)
+          if (k & (1u << j)) x ^= m.columns[8 * b + j];
+        table[b][k] = x;
+      }
+  }
+};
+constexpr SobolTables kSobolDim1;
 
 uint32_t sobolDim1(uint32_t index) {
-  uint32_t x = 0;
-  for (int j = 0; index != 0; ++j, index >>= 1)
-    if (index & 1u) x ^= kSobolDim1.columns[j];
-  return x;
+  return kSobolDim1.table[0][index & 0xffu] ^ kSobolDim1.table[1][(index >> 8) & 0xffu] ^
+         kSobolDim1.table[2][(index >> 16) & 0xffu] ^ kSobolDim1.table[3][index >> 24];
 }
 
 // Top 24 bits to a float in [0,1): exact, and never rounds up to 1.
@@ -93,9 +108,11 @@ vec2 sobol2D(uint32_t index, uint64_t seed) {
   // shuffled index depends only on bits >= p, so the first 2^k indices map onto one aligned
   // block of 2^k Sobol points, which is itself a (0,k,2)-net: every power-of-two prefix stays
   // stratified. The two dimensions then get independent value scrambles.
-  uint32_t shuffleSeed = uint32_t(mixBits(seed ^ 0x5bd1e995u));
-  uint32_t seed0 = uint32_t(hashValues(seed, 1));
-  uint32_t seed1 = uint32_t(hashValues(seed, 2));
+  // One 64-bit hash gives both value seeds; the seed itself is already a hash.
+  uint32_t shuffleSeed = uint32_t(seed);
+  uint64_t valueSeeds = mixBits(seed ^ 0x5bd1e9955bd1e995ull);
+  uint32_t seed0 = uint32_t(valueSeeds);
+  uint32_t seed1 = uint32_t(valueSeeds >> 32);
   uint32_t i = nestedUniformScramble(index, shuffleSeed);
   uint32_t x = nestedUniformScramble(reverseBits(i), seed0);
   uint32_t y = nestedUniformScramble(sobolDim1(i), seed1);
