@@ -1,1 +1,1496 @@
-// placeholder: being written
+// gltf_loader.cpp: glTF 2.0 (.gltf + .bin, .glb) to kiln's Scene, through tinygltf.
+//
+// Loading runs in four passes:
+//  1. the file is read, a .glb header checked, and the JSON parsed with nlohmann (depth-limited)
+//     so that malformed JSON gets a precise message;
+//  2. a pre-pass over that JSON checks every index that refers to another element, buffer
+//     files and sizes, and bufferView ranges. tinygltf trusts some of these (it reads images
+//     straight out of bufferViews), so nothing reaches it unchecked;
+//  3. tinygltf builds its Model (buffers loaded, images kept as encoded bytes by our own
+//     image callback so that a missing or broken image only warns);
+//  4. the Model is validated (accessor ranges) and flattened into world space.
+// Errors inside the passes are thrown as a private exception and turned into a kiln::Error at
+// the top: the loader is deep, and every failure ends the load, so this keeps each check on
+// one line. Nothing escapes loadScene().
+#include "src/gltf_loader.h"
+
+#include <stb_image.h>
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "src/image.h"
+
+namespace kiln {
+namespace {
+
+using Json = nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr int kMaxJsonDepth = 128;                // deeper documents are rejected
+constexpr uint64_t kMaxImagePixels = 1ull << 26;  // 64 Mpixel: larger images are skipped
+const char* const kSupportedExtensions[] = {"KHR_lights_punctual",
+                                            "KHR_materials_emissive_strength"};
+
+// Thrown by Loader::fail; caught in loadScene.
+struct LoadFailure {
+  std::string message;
+};
+
+std::string trim(std::string s) {
+  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+  for (char& c : s)
+    if (c == '\n') c = ';';
+  return s;
+}
+
+std::string percentDecode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) &&
+        std::isxdigit(uint8_t(s[i + 2]))) {
+      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  return out;
+}
+
+bool isDataUri(const std::string& uri) { return uri.rfind("data:", 0) == 0; }
+
+uint32_t readU32(const uint8_t* p) {
+  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+
+// tinygltf image callback: keeps the encoded bytes; kiln decodes them itself once it knows
+// which textures are used and how (sRGB or not), and turns decode failures into warnings.
+bool keepEncodedImage(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                      const unsigned char* bytes, int size, void*) {
+  image->image.assign(bytes, bytes + std::max(size, 0));
+  image->as_is = true;
+  return true;
+}
+
+const char* modeName(int mode) {
+  switch (mode) {
+    case TINYGLTF_MODE_POINTS:
+      return "POINTS";
+    case TINYGLTF_MODE_LINE:
+      return "LINES";
+    case TINYGLTF_MODE_LINE_LOOP:
+      return "LINE_LOOP";
+    case TINYGLTF_MODE_LINE_STRIP:
+      return "LINE_STRIP";
+    default:
+      return "unknown";
+  }
+}
+
+int componentSize(int componentType) {
+  switch (componentType) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+      return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+      return 4;
+    default:
+      return 0;  // INT and DOUBLE are not valid glTF 2.0 accessor types
+  }
+}
+
+// One component as a double; normalized integers per glTF 2.0 ("Animations" / accessor
+// normalization: signed values are clamped to -1).
+double readComponent(const uint8_t* p, int componentType, bool normalized) {
+  switch (componentType) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+      int8_t v;
+      std::memcpy(&v, p, 1);
+      return normalized ? std::max(v / 127.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      return normalized ? p[0] / 255.0 : p[0];
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? std::max(v / 32767.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? v / 65535.0 : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    default:
+      assert(false);
+      return 0.0;
+  }
+}
+
+// Everything one primitive contributes to its object, in world space.
+struct PrimitiveGeometry {
+  std::vector<vec3> positions, normals;
+  std::vector<vec2> uv0, uv1;
+  bool hasUv0 = false, hasUv1 = false;
+  std::vector<uvec3> triangles;
+  uint32_t material = 0;
+};
+
+struct DropCounts {
+  size_t nonFinite = 0, degenerate = 0, badNormals = 0;
+  bool generatedNormals = false;
+};
+
+class Loader {
+ public:
+  Loader(std::string path, const LoadOptions& options)
+      : path_(std::move(path)), options_(options) {}
+
+  Scene load() {
+    scene_.path = path_;
+    readDocument();
+    precheck();
+    runTinyGltf();
+    checkAccessors();
+    convertMaterials();
+    convertScene();
+    scene_.updateBounds();
+    return std::move(scene_);
+  }
+
+ private:
+  // ---- messages ---------------------------------------------------------------------------
+
+  [[noreturn]] void fail(const std::string& element, const std::string& what) const {
+    throw LoadFailure{path_ + ": " + (element.empty() ? "" : element + ": ") + what};
+  }
+  void warn(const std::string& element, const std::string& what) {
+    scene_.warnings.push_back(path_ + ": " + (element.empty() ? "" : element + ": ") + what);
+  }
+
+  // ---- pass 1: the file and its JSON -------------------------------------------------------
+
+  void readDocument() {
+    std::error_code ec;
+    if (fs::is_directory(path_, ec)) fail("", "is a directory, not a glTF file");
+    std::ifstream in(path_, std::ios::binary);
+    if (!in) fail("", std::string("cannot open the file: ") + std::strerror(errno));
+    bytes_.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    if (in.bad()) fail("", "read error");
+    baseDir_ = fs::path(path_).parent_path().string();
+
+    std::string ext = fs::path(path_).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](char c) { return char(std::tolower(c)); });
+    isGlb_ = bytes_.size() >= 4 && std::memcmp(bytes_.data(), "glTF", 4) == 0;
+    if (!isGlb_ && ext == ".glb") fail("GLB header", "bad magic (expected 'glTF')");
+
+    const char* jsonBegin = reinterpret_cast<const char*>(bytes_.data());
+    size_t jsonSize = bytes_.size();
+    if (isGlb_) parseGlbHeader(&jsonBegin, &jsonSize);
+    if (jsonSize == 0) fail("", "empty file");
+
+    // Depth-limited so that nesting bombs are refused before anything recursive sees them.
+    auto limitDepth = [this](int depth, Json::parse_event_t, Json&) {
+      if (depth > kMaxJsonDepth)
+        fail("", "JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+      return true;
+    };
+    try {
+      doc_ = Json::parse(jsonBegin, jsonBegin + jsonSize, limitDepth);
+    } catch (const Json::exception& e) {
+      fail("", std::string("malformed JSON: ") + e.what());
+    }
+    if (!doc_.is_object()) fail("", "malformed glTF: the JSON root is not an object");
+  }
+
+  // Binary glTF layout (glTF 2.0 spec, "GLB File Format Specification").
+  void parseGlbHeader(const char** json, size_t* jsonSize) {
+    const uint8_t* b = bytes_.data();
+    size_t size = bytes_.size();
+    if (size < 20) fail("GLB header", "file too short (" + std::to_string(size) + " bytes)");
+    uint32_t version = readU32(b + 4), length = readU32(b + 8);
+    if (version != 2) fail("GLB header", "version " + std::to_string(version) + " (expected 2)");
+    if (length > size || length < 20)
+      fail("GLB header", "length " + std::to_string(length) + " does not match the file size " +
+                             std::to_string(size));
+    uint32_t chunk0Length = readU32(b + 12), chunk0Type = readU32(b + 16);
+    if (chunk0Type != 0x4E4F534Au) fail("GLB header", "the first chunk is not JSON");
+    if (uint64_t(chunk0Length) + 20 > length || chunk0Length == 0)
+      fail("GLB header",
+           "JSON chunk length " + std::to_string(chunk0Length) + " runs past the end of the file");
+    *json = reinterpret_cast<const char*>(b + 20);
+    *jsonSize = chunk0Length;
+    uint64_t binHeader = 20 + uint64_t(chunk0Length);
+    if (binHeader + 8 <= length) {
+      uint32_t chunk1Length = readU32(b + binHeader), chunk1Type = readU32(b + binHeader + 4);
+      if (chunk1Type != 0x004E4942u) fail("GLB header", "the second chunk is not BIN");
+      if (binHeader + 8 + chunk1Length > length)
+        fail("GLB header",
+             "BIN chunk length " + std::to_string(chunk1Length) + " runs past the end of the file");
+      glbBinSize_ = chunk1Length;
+    }
+  }
+
+  // ---- pass 2: references and buffers, on the raw JSON --------------------------------------
+
+  const Json& array(const char* key) const {
+    static const Json kEmpty = Json::array();
+    auto it = doc_.find(key);
+    if (it == doc_.end()) return kEmpty;
+    if (!it->is_array()) fail(key, "must be an array");
+    return *it;
+  }
+
+  // Checks an optional reference `obj[key]` into an array of `count` elements.
+  void checkIndex(const Json& obj, const char* key, const std::string& element, size_t count,
+                  const char* target) const {
+    if (!obj.is_object()) return;
+    auto it = obj.find(key);
+    if (it == obj.end()) return;
+    checkIndexValue(*it, element + "." + key, count, target);
+  }
+  void checkIndexValue(const Json& v, const std::string& element, size_t count,
+                       const char* target) const {
+    if (!v.is_number_integer() || v.get<int64_t>() < 0)
+      fail(element, "must be an index (an integer >= 0)");
+    if (uint64_t(v.get<int64_t>()) >= count)
+      fail(element, "refers to " + std::string(target) + "[" + std::to_string(v.get<int64_t>()) +
+                        "], but there are only " + std::to_string(count));
+  }
+  // A non-negative integer property (byteOffset, byteLength...), 0 when absent.
+  uint64_t unsignedProperty(const Json& obj, const char* key, const std::string& element,
+                            bool required) const {
+    auto it = obj.find(key);
+    if (it == obj.end()) {
+      if (required) fail(element, std::string("missing required '") + key + "'");
+      return 0;
+    }
+    if (!it->is_number_integer() || it->get<int64_t>() < 0)
+      fail(element + "." + key, "must be an integer >= 0");
+    return it->get<uint64_t>();
+  }
+
+  void checkTextureInfo(const Json& material, const std::string& element, const char* key,
+                        size_t textureCount) const {
+    const Json* info = &material;
+    std::string where = element;
+    if (std::string(key) == "baseColorTexture" || std::string(key) == "metallicRoughnessTexture") {
+      auto pbr = material.find("pbrMetallicRoughness");
+      if (pbr == material.end() || !pbr->is_object()) return;
+      info = &*pbr;
+      where += ".pbrMetallicRoughness";
+    }
+    auto it = info->find(key);
+    if (it == info->end()) return;
+    if (!it->is_object()) fail(where + "." + key, "must be an object");
+    if (!it->contains("index")) fail(where + "." + key, "missing required 'index'");
+    checkIndex(*it, "index", where + "." + key, textureCount, "textures");
+  }
+
+  void precheck() {
+    // extensionsRequired: refuse what kiln would silently get wrong.
+    std::vector<std::string> unsupported;
+    for (const Json& e : array("extensionsRequired")) {
+      if (!e.is_string()) fail("extensionsRequired", "must be an array of strings");
+      std::string name = e.get<std::string>();
+      if (std::find(std::begin(kSupportedExtensions), std::end(kSupportedExtensions), name) ==
+          std::end(kSupportedExtensions))
+        unsupported.push_back(name);
+    }
+    if (!unsupported.empty()) {
+      std::string list, supported;
+      for (const auto& u : unsupported) list += (list.empty() ? "" : ", ") + u;
+      for (const char* s : kSupportedExtensions)
+        supported += (supported.empty() ? "" : ", ") + std::string(s);
+      fail("extensionsRequired",
+           "unsupported extension(s) " + list + " (kiln supports " + supported + ")");
+    }
+
+    const Json& buffers = array("buffers");
+    const Json& bufferViews = array("bufferViews");
+    const Json& accessors = array("accessors");
+    const Json& meshes = array("meshes");
+    const Json& materials = array("materials");
+    const Json& textures = array("textures");
+    const Json& images = array("images");
+    const Json& samplers = array("samplers");
+    const Json& nodes = array("nodes");
+    const Json& scenes = array("scenes");
+    const Json& cameras = array("cameras");
+    size_t lightCount = 0;
+    if (auto ext = doc_.find("extensions"); ext != doc_.end() && ext->is_object()) {
+      if (auto lp = ext->find("KHR_lights_punctual"); lp != ext->end() && lp->is_object()) {
+        if (auto lights = lp->find("lights"); lights != lp->end()) {
+          if (!lights->is_array())
+            fail("extensions.KHR_lights_punctual.lights", "must be an array");
+          lightCount = lights->size();
+        }
+      }
+    }
+
+    // Buffers: files present and long enough, before tinygltf reads them.
+    bufferLengths_.clear();
+    for (size_t i = 0; i < buffers.size(); ++i) {
+      std::string element = "buffers[" + std::to_string(i) + "]";
+      const Json& b = buffers[i];
+      if (!b.is_object()) fail(element, "must be an object");
+      uint64_t byteLength = unsignedProperty(b, "byteLength", element, true);
+      if (byteLength == 0) fail(element + ".byteLength", "must be >= 1");
+      bufferLengths_.push_back(byteLength);
+      auto uriIt = b.find("uri");
+      if (uriIt == b.end()) {
+        if (!isGlb_ || i != 0) fail(element, "has no uri (only a .glb's first buffer may omit it)");
+        if (byteLength > glbBinSize_)
+          fail(element, "byteLength " + std::to_string(byteLength) +
+                            " is longer than the GLB BIN chunk (" + std::to_string(glbBinSize_) +
+                            " bytes)");
+        continue;
+      }
+      if (!uriIt->is_string()) fail(element + ".uri", "must be a string");
+      std::string uri = uriIt->get<std::string>();
+      if (isDataUri(uri)) continue;  // tinygltf decodes and checks its length
+      fs::path file = fs::path(baseDir_) / percentDecode(uri);
+      std::error_code ec;
+      if (!fs::is_regular_file(file, ec)) fail(element, "file '" + uri + "' not found");
+      uint64_t fileSize = fs::file_size(file, ec);
+      if (ec) fail(element, "cannot read '" + uri + "'");
+      if (fileSize < byteLength)
+        fail(element, "file '" + uri + "' is " + std::to_string(fileSize) +
+                          " bytes, shorter than byteLength " + std::to_string(byteLength));
+      if (fileSize > byteLength)  // tinygltf insists on equality
+        fail(element, "file '" + uri + "' is " + std::to_string(fileSize) +
+                          " bytes, but byteLength is " + std::to_string(byteLength));
+    }
+
+    for (size_t i = 0; i < bufferViews.size(); ++i) {
+      std::string element = "bufferViews[" + std::to_string(i) + "]";
+      const Json& v = bufferViews[i];
+      if (!v.is_object()) fail(element, "must be an object");
+      if (!v.contains("buffer")) fail(element, "missing required 'buffer'");
+      checkIndex(v, "buffer", element, buffers.size(), "buffers");
+      uint64_t buffer = v["buffer"].get<uint64_t>();
+      uint64_t offset = unsignedProperty(v, "byteOffset", element, false);
+      uint64_t length = unsignedProperty(v, "byteLength", element, true);
+      if (length == 0) fail(element + ".byteLength", "must be >= 1");
+      if (offset > bufferLengths_[buffer] || length > bufferLengths_[buffer] - offset)
+        fail(element, "byteOffset " + std::to_string(offset) + " + byteLength " +
+                          std::to_string(length) + " runs past buffers[" + std::to_string(buffer) +
+                          "] (" + std::to_string(bufferLengths_[buffer]) + " bytes)");
+      if (v.contains("byteStride")) {
+        uint64_t stride = unsignedProperty(v, "byteStride", element, false);
+        if (stride < 4 || stride > 252 || stride % 4 != 0)
+          fail(element + ".byteStride", "must be a multiple of 4 in [4, 252]");
+      }
+    }
+
+    for (size_t i = 0; i < accessors.size(); ++i) {
+      std::string element = "accessors[" + std::to_string(i) + "]";
+      const Json& a = accessors[i];
+      if (!a.is_object()) fail(element, "must be an object");
+      checkIndex(a, "bufferView", element, bufferViews.size(), "bufferViews");
+      if (auto sparse = a.find("sparse"); sparse != a.end()) {
+        if (!sparse->is_object()) fail(element + ".sparse", "must be an object");
+        for (const char* part : {"indices", "values"}) {
+          std::string where = element + ".sparse." + part;
+          auto p = sparse->find(part);
+          if (p == sparse->end() || !p->is_object()) fail(where, "missing or not an object");
+          if (!p->contains("bufferView")) fail(where, "missing required 'bufferView'");
+          checkIndex(*p, "bufferView", where, bufferViews.size(), "bufferViews");
+        }
+      }
+    }
+
+    for (size_t i = 0; i < meshes.size(); ++i) {
+      std::string element = "meshes[" + std::to_string(i) + "]";
+      if (!meshes[i].is_object()) fail(element, "must be an object");
+      auto prims = meshes[i].find("primitives");
+      if (prims == meshes[i].end() || !prims->is_array())
+        fail(element, "missing required 'primitives' array");
+      for (size_t j = 0; j < prims->size(); ++j) {
+        std::string where = element + ".primitives[" + std::to_string(j) + "]";
+        const Json& p = (*prims)[j];
+        if (!p.is_object()) fail(where, "must be an object");
+        checkIndex(p, "indices", where, accessors.size(), "accessors");
+        checkIndex(p, "material", where, materials.size(), "materials");
+        auto attrs = p.find("attributes");
+        if (attrs == p.end() || !attrs->is_object())
+          fail(where, "missing required 'attributes' object");
+        for (auto it = attrs->begin(); it != attrs->end(); ++it)
+          checkIndexValue(it.value(), where + ".attributes." + it.key(), accessors.size(),
+                          "accessors");
+        if (auto targets = p.find("targets"); targets != p.end() && targets->is_array())
+          for (const Json& t : *targets)
+            if (t.is_object())
+              for (auto it = t.begin(); it != t.end(); ++it)
+                checkIndexValue(it.value(), where + ".targets." + it.key(), accessors.size(),
+                                "accessors");
+      }
+    }
+
+    for (size_t i = 0; i < materials.size(); ++i) {
+      std::string element = "materials[" + std::to_string(i) + "]";
+      if (!materials[i].is_object()) fail(element, "must be an object");
+      for (const char* key : {"baseColorTexture", "metallicRoughnessTexture", "normalTexture",
+                              "occlusionTexture", "emissiveTexture"})
+        checkTextureInfo(materials[i], element, key, textures.size());
+    }
+    for (size_t i = 0; i < textures.size(); ++i) {
+      std::string element = "textures[" + std::to_string(i) + "]";
+      if (!textures[i].is_object()) fail(element, "must be an object");
+      checkIndex(textures[i], "source", element, images.size(), "images");
+      checkIndex(textures[i], "sampler", element, samplers.size(), "samplers");
+    }
+    for (size_t i = 0; i < images.size(); ++i) {
+      std::string element = "images[" + std::to_string(i) + "]";
+      if (!images[i].is_object()) fail(element, "must be an object");
+      checkIndex(images[i], "bufferView", element, bufferViews.size(), "bufferViews");
+      bool hasUri = images[i].contains("uri"), hasView = images[i].contains("bufferView");
+      if (hasUri == hasView) fail(element, "must have exactly one of 'uri' and 'bufferView'");
+      if (hasUri && !images[i]["uri"].is_string()) fail(element + ".uri", "must be a string");
+    }
+    for (size_t i = 0; i < samplers.size(); ++i)
+      if (!samplers[i].is_object())
+        fail("samplers[" + std::to_string(i) + "]", "must be an object");
+    for (size_t i = 0; i < cameras.size(); ++i)
+      if (!cameras[i].is_object()) fail("cameras[" + std::to_string(i) + "]", "must be an object");
+
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      std::string element = "nodes[" + std::to_string(i) + "]";
+      const Json& n = nodes[i];
+      if (!n.is_object()) fail(element, "must be an object");
+      checkIndex(n, "mesh", element, meshes.size(), "meshes");
+      checkIndex(n, "camera", element, cameras.size(), "cameras");
+      checkIndex(n, "skin", element, array("skins").size(), "skins");
+      if (auto children = n.find("children"); children != n.end()) {
+        if (!children->is_array()) fail(element + ".children", "must be an array");
+        for (size_t c = 0; c < children->size(); ++c)
+          checkIndexValue((*children)[c], element + ".children[" + std::to_string(c) + "]",
+                          nodes.size(), "nodes");
+      }
+      if (auto ext = n.find("extensions"); ext != n.end() && ext->is_object()) {
+        if (auto lp = ext->find("KHR_lights_punctual"); lp != ext->end()) {
+          std::string where = element + ".extensions.KHR_lights_punctual";
+          if (!lp->is_object() || !lp->contains("light"))
+            fail(where, "must be an object with a 'light' index");
+          checkIndex(*lp, "light", where, lightCount, "lights");
+        }
+      }
+    }
+    for (size_t i = 0; i < scenes.size(); ++i) {
+      std::string element = "scenes[" + std::to_string(i) + "]";
+      if (!scenes[i].is_object()) fail(element, "must be an object");
+      if (auto sn = scenes[i].find("nodes"); sn != scenes[i].end()) {
+        if (!sn->is_array()) fail(element + ".nodes", "must be an array");
+        for (size_t k = 0; k < sn->size(); ++k)
+          checkIndexValue((*sn)[k], element + ".nodes[" + std::to_string(k) + "]", nodes.size(),
+                          "nodes");
+      }
+    }
+    if (doc_.contains("scene")) checkIndexValue(doc_["scene"], "scene", scenes.size(), "scenes");
+  }
+
+  // ---- pass 3: tinygltf ---------------------------------------------------------------------
+
+  void runTinyGltf() {
+    tinygltf::TinyGLTF gltf;
+    gltf.SetImageLoader(&keepEncodedImage, nullptr);
+    std::string err, warn;
+    bool ok;
+    if (isGlb_) {
+      if (bytes_.size() > std::numeric_limits<unsigned int>::max())
+        fail("", "file too large for tinygltf (4 GiB)");
+      ok = gltf.LoadBinaryFromMemory(&model_, &err, &warn, bytes_.data(),
+                                     static_cast<unsigned int>(bytes_.size()), baseDir_);
+    } else {
+      std::string text(bytes_.begin(), bytes_.end());
+      if (text.size() > std::numeric_limits<unsigned int>::max())
+        fail("", "file too large for tinygltf (4 GiB)");
+      ok = gltf.LoadASCIIFromString(&model_, &err, &warn, text.data(),
+                                    static_cast<unsigned int>(text.size()), baseDir_);
+    }
+    // tinygltf's own warnings are about images we report ourselves (per texture, with what
+    // kiln does about it), so they are not repeated.
+    if (!ok) fail("", "invalid glTF: " + trim(err.empty() ? "tinygltf failed" : err));
+    bytes_.clear();
+    bytes_.shrink_to_fit();
+  }
+
+  // ---- pass 4a: accessors ---------------------------------------------------------------------
+
+  void checkAccessors() const {
+    for (size_t i = 0; i < model_.buffers.size(); ++i)
+      if (model_.buffers[i].data.size() < bufferLengths_[i])
+        fail("buffers[" + std::to_string(i) + "]",
+             "holds " + std::to_string(model_.buffers[i].data.size()) +
+                 " bytes, shorter than byteLength " + std::to_string(bufferLengths_[i]));
+    for (size_t i = 0; i < model_.accessors.size(); ++i) {
+      const tinygltf::Accessor& a = model_.accessors[i];
+      std::string element = "accessors[" + std::to_string(i) + "]";
+      int size = componentSize(a.componentType);
+      if (size == 0)
+        fail(element, "componentType " + std::to_string(a.componentType) + " is not valid");
+      int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+      if (components <= 0) fail(element, "invalid type");
+      if (a.count == 0) fail(element + ".count", "must be >= 1");
+      uint64_t elementSize = uint64_t(size) * components;
+      if (a.bufferView >= 0) {
+        const tinygltf::BufferView& view = model_.bufferViews[size_t(a.bufferView)];
+        uint64_t stride = view.byteStride ? view.byteStride : elementSize;
+        if (view.byteStride && view.byteStride % size != 0)
+          fail(element, "bufferViews[" + std::to_string(a.bufferView) + "].byteStride " +
+                            std::to_string(view.byteStride) + " is not a multiple of the " +
+                            "component size " + std::to_string(size));
+        if (view.byteStride && view.byteStride < elementSize)
+          fail(element, "bufferViews[" + std::to_string(a.bufferView) + "].byteStride " +
+                            std::to_string(view.byteStride) + " is smaller than an element (" +
+                            std::to_string(elementSize) + " bytes)");
+        if (a.byteOffset % size != 0)
+          fail(element + ".byteOffset", "must be a multiple of the component size");
+        // In double first so that a huge count cannot overflow the exact check.
+        double approx = double(a.byteOffset) + double(stride) * double(a.count - 1) + elementSize;
+        if (approx > double(view.byteLength) + 1.0 ||
+            a.byteOffset + stride * (a.count - 1) + elementSize > view.byteLength)
+          fail(element, "byteOffset " + std::to_string(a.byteOffset) + " + count " +
+                            std::to_string(a.count) + " x stride " + std::to_string(stride) +
+                            " runs past bufferViews[" + std::to_string(a.bufferView) + "] (" +
+                            std::to_string(view.byteLength) + " bytes)");
+      } else if (a.count > (uint64_t(1) << 24)) {
+        // Without a bufferView the values are zeros (plus sparse entries) that cost the file
+        // nothing, so the count alone would decide the allocation: bound it.
+        fail(element, "count " + std::to_string(a.count) + " is too large without a bufferView");
+      }
+      if (a.sparse.isSparse) {
+        const auto& s = a.sparse;
+        if (s.count <= 0 || size_t(s.count) > a.count)
+          fail(element + ".sparse.count", "must be in [1, count]");
+        int indexSize = componentSize(s.indices.componentType);
+        if (s.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+            s.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+            s.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+          fail(element + ".sparse.indices.componentType", "must be an unsigned integer type");
+        checkSparseRange(element + ".sparse.indices", s.indices.bufferView, s.indices.byteOffset,
+                         uint64_t(s.count) * indexSize);
+        checkSparseRange(element + ".sparse.values", s.values.bufferView, s.values.byteOffset,
+                         uint64_t(s.count) * elementSize);
+      }
+    }
+  }
+
+  void checkSparseRange(const std::string& element, int view, int offset, uint64_t bytes) const {
+    if (view < 0 || size_t(view) >= model_.bufferViews.size()) fail(element, "invalid bufferView");
+    if (offset < 0) fail(element + ".byteOffset", "must be >= 0");
+    const auto& v = model_.bufferViews[size_t(view)];
+    if (uint64_t(offset) + bytes > v.byteLength)
+      fail(element, "runs past bufferViews[" + std::to_string(view) + "] (" +
+                        std::to_string(v.byteLength) + " bytes)");
+  }
+
+  const uint8_t* viewData(int view) const {
+    const auto& v = model_.bufferViews[size_t(view)];
+    return model_.buffers[size_t(v.buffer)].data.data() + v.byteOffset;
+  }
+
+  // Reads accessor `index` as doubles, `components` per element (sparse entries applied).
+  // `expectedComponents` 0 = any. The accessor's ranges were checked by checkAccessors().
+  std::vector<double> readAccessor(int index, int expectedComponents, const std::string& use,
+                                   int* componentsOut = nullptr) const {
+    const tinygltf::Accessor& a = model_.accessors[size_t(index)];
+    std::string element = "accessors[" + std::to_string(index) + "]";
+    int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+    if (expectedComponents && (components != expectedComponents || a.type == TINYGLTF_TYPE_MAT2))
+      fail(element, "has " + std::to_string(components) + " components, but " + use + " needs " +
+                        std::to_string(expectedComponents));
+    if (componentsOut) *componentsOut = components;
+    int size = componentSize(a.componentType);
+    std::vector<double> out(a.count * size_t(components), 0.0);
+    if (a.bufferView >= 0) {
+      const auto& view = model_.bufferViews[size_t(a.bufferView)];
+      size_t stride = view.byteStride ? view.byteStride : size_t(size) * components;
+      const uint8_t* base = viewData(a.bufferView) + a.byteOffset;
+      for (size_t e = 0; e < a.count; ++e)
+        for (int c = 0; c < components; ++c)
+          out[e * components + c] =
+              readComponent(base + e * stride + size_t(c) * size, a.componentType, a.normalized);
+    }
+    if (a.sparse.isSparse) {
+      const auto& s = a.sparse;
+      const uint8_t* indices = viewData(s.indices.bufferView) + s.indices.byteOffset;
+      const uint8_t* values = viewData(s.values.bufferView) + s.values.byteOffset;
+      int indexSize = componentSize(s.indices.componentType);
+      for (int k = 0; k < s.count; ++k) {
+        double target =
+            readComponent(indices + size_t(k) * indexSize, s.indices.componentType, false);
+        if (target >= double(a.count))
+          fail(element + ".sparse.indices", "index " + std::to_string(uint64_t(target)) +
+                                                " >= count " + std::to_string(a.count));
+        for (int c = 0; c < components; ++c)
+          out[size_t(target) * components + c] = readComponent(
+              values + (size_t(k) * components + c) * size, a.componentType, a.normalized);
+      }
+    }
+    return out;
+  }
+
+  // ---- pass 4b: materials and textures --------------------------------------------------------
+
+  void convertMaterials() {
+    const Json& jsonMaterials = array("materials");
+    for (size_t m = 0; m < model_.materials.size(); ++m) {
+      const tinygltf::Material& src = model_.materials[m];
+      std::string element = "materials[" + std::to_string(m) + "]";
+      Material dst;
+      dst.name = src.name.empty() ? element : src.name;
+      const auto& pbr = src.pbrMetallicRoughness;
+      if (pbr.baseColorFactor.size() != 4)
+        fail(element + ".pbrMetallicRoughness.baseColorFactor", "must have 4 numbers");
+      for (int c = 0; c < 4; ++c) dst.baseColorFactor[c] = float(pbr.baseColorFactor[size_t(c)]);
+      checkFactor(element + ".pbrMetallicRoughness.baseColorFactor", dst.baseColorFactor, 1.0f);
+      dst.metallic = float(pbr.metallicFactor);
+      dst.roughness = float(pbr.roughnessFactor);
+      checkFactor(element + ".pbrMetallicRoughness.metallicFactor", vec4(dst.metallic), 1.0f);
+      checkFactor(element + ".pbrMetallicRoughness.roughnessFactor", vec4(dst.roughness), 1.0f);
+      if (src.alphaMode == "OPAQUE")
+        dst.alphaMode = AlphaMode::Opaque;
+      else if (src.alphaMode == "MASK")
+        dst.alphaMode = AlphaMode::Mask;
+      else if (src.alphaMode == "BLEND")
+        dst.alphaMode = AlphaMode::Blend;
+      else
+        fail(element + ".alphaMode", "must be OPAQUE, MASK or BLEND (got '" + src.alphaMode + "')");
+      dst.alphaCutoff = float(src.alphaCutoff);
+      checkFactor(element + ".alphaCutoff", vec4(dst.alphaCutoff), kInfinity);
+      dst.doubleSided = src.doubleSided;
+      if (src.emissiveFactor.size() != 3) fail(element + ".emissiveFactor", "must have 3 numbers");
+      for (int c = 0; c < 3; ++c) dst.emissiveFactor[c] = float(src.emissiveFactor[size_t(c)]);
+      checkFactor(element + ".emissiveFactor", vec4(dst.emissiveFactor, 0.0f), 1.0f);
+
+      const Json& jm = jsonMaterials[m];
+      if (auto ext = jm.find("extensions"); ext != jm.end() && ext->is_object()) {
+        if (auto es = ext->find("KHR_materials_emissive_strength"); es != ext->end()) {
+          std::string where = element + ".extensions.KHR_materials_emissive_strength";
+          if (!es->is_object()) fail(where, "must be an object");
+          if (auto s = es->find("emissiveStrength"); s != es->end()) {
+            if (!s->is_number() || !std::isfinite(float(s->get<double>())) || s->get<double>() < 0)
+              fail(where + ".emissiveStrength", "must be a finite number >= 0");
+            dst.emissiveStrength = float(s->get<double>());
+          }
+        }
+      }
+
+      dst.baseColorTexture = useTexture(pbr.baseColorTexture.index,
+                                        element + ".pbrMetallicRoughness.baseColorTexture");
+      dst.baseColorTexCoord = texCoordSet(pbr.baseColorTexture.texCoord,
+                                          element + ".pbrMetallicRoughness.baseColorTexture");
+      dst.emissiveTexture = useTexture(src.emissiveTexture.index, element + ".emissiveTexture");
+      dst.emissiveTexCoord =
+          texCoordSet(src.emissiveTexture.texCoord, element + ".emissiveTexture");
+      scene_.materials.push_back(std::move(dst));
+    }
+  }
+
+  // Rejects non-finite or negative factors and values above `max`.
+  void checkFactor(const std::string& element, vec4 v, float max) const {
+    for (int c = 0; c < 4; ++c)
+      if (!std::isfinite(v[c]) || v[c] < 0.0f || v[c] > max)
+        fail(element, max == kInfinity
+                          ? "must be finite and >= 0"
+                          : "must be finite and in [0, " + std::to_string(int(max)) + "]");
+  }
+
+  int texCoordSet(int set, const std::string& element) {
+    if (set == 0 || set == 1) return set;
+    if (set < 0) fail(element + ".texCoord", "must be >= 0");
+    warn(element + ".texCoord", "TEXCOORD_" + std::to_string(set) +
+                                    " is not supported (kiln reads TEXCOORD_0 and _1), using 0");
+    return 0;
+  }
+
+  // Maps a glTF texture to a kiln texture, decoding it the first time (sRGB: kiln only uses
+  // base colour and emissive textures, which glTF defines as sRGB). -1 = use the factor.
+  int useTexture(int gltfTexture, const std::string& user) {
+    if (gltfTexture < 0 || !options_.loadTextures) return -1;
+    auto known = textureMap_.find(gltfTexture);
+    if (known != textureMap_.end()) return known->second;
+    int result = decodeTexture(gltfTexture);
+    textureMap_[gltfTexture] = result;
+    return result;
+  }
+
+  int decodeTexture(int t) {
+    std::string element = "textures[" + std::to_string(t) + "]";
+    const tinygltf::Texture& tex = model_.textures[size_t(t)];
+    if (tex.source < 0) {
+      warn(element, "no image kiln can read (no 'source'), using the factor");
+      return -1;
+    }
+    const tinygltf::Image& img = model_.images[size_t(tex.source)];
+    std::string label = !img.uri.empty() && !isDataUri(img.uri) ? img.uri
+                        : !img.name.empty()                     ? img.name
+                                            : "images[" + std::to_string(tex.source) + "]";
+    if (img.image.empty()) {
+      warn(element, "image '" + label + "' not found, using the factor");
+      return -1;
+    }
+    const auto* data = img.image.data();
+    int size = int(img.image.size());
+    int w = 0, h = 0, n = 0;
+    if (!stbi_info_from_memory(data, size, &w, &h, &n)) {
+      warn(element, "image '" + label + "' could not be decoded (" +
+                        (stbi_failure_reason() ? stbi_failure_reason() : "unknown format") +
+                        "), using the factor");
+      return -1;
+    }
+    if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels) {
+      warn(element, "image '" + label + "' is too large (" + std::to_string(w) + "x" +
+                        std::to_string(h) + "), using the factor");
+      return -1;
+    }
+    Texture out;
+    out.name = element + " (" + label + ")";
+    out.image = Image(w, h, 4);
+    bool ok = false;
+    if (stbi_is_16_bit_from_memory(data, size)) {
+      if (stbi_us* px = stbi_load_16_from_memory(data, size, &w, &h, &n, 4)) {
+        for (size_t i = 0; i < size_t(w) * h * 4; ++i) out.image.pixels[i] = px[i] / 65535.0f;
+        stbi_image_free(px);
+        ok = true;
+      }
+    } else if (stbi_uc* px = stbi_load_from_memory(data, size, &w, &h, &n, 4)) {
+      for (size_t i = 0; i < size_t(w) * h * 4; ++i) out.image.pixels[i] = px[i] / 255.0f;
+      stbi_image_free(px);
+      ok = true;
+    }
+    if (!ok) {
+      warn(element, "image '" + label + "' could not be decoded (" +
+                        (stbi_failure_reason() ? stbi_failure_reason() : "unknown") +
+                        "), using the factor");
+      return -1;
+    }
+    glm::dvec4 sum(0.0);
+    for (size_t i = 0; i < size_t(w) * h; ++i) {
+      float* p = &out.image.pixels[i * 4];
+      for (int c = 0; c < 3; ++c) p[c] = srgbToLinear(p[c]);
+      sum += glm::dvec4(p[0], p[1], p[2], p[3]);
+    }
+    out.average = vec4(sum / double(size_t(w) * h));
+    if (tex.sampler >= 0) {
+      const tinygltf::Sampler& s = model_.samplers[size_t(tex.sampler)];
+      std::string where = "samplers[" + std::to_string(tex.sampler) + "]";
+      out.sampler.wrapS = wrapMode(s.wrapS, where + ".wrapS");
+      out.sampler.wrapT = wrapMode(s.wrapT, where + ".wrapT");
+      out.sampler.nearest = s.magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
+      if (s.magFilter != -1 && s.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST &&
+          s.magFilter != TINYGLTF_TEXTURE_FILTER_LINEAR)
+        fail(where + ".magFilter", "must be 9728 (NEAREST) or 9729 (LINEAR)");
+    }
+    scene_.textures.push_back(std::move(out));
+    return int(scene_.textures.size() - 1);
+  }
+
+  Wrap wrapMode(int value, const std::string& element) const {
+    if (value == int(Wrap::Repeat) || value == int(Wrap::ClampToEdge) ||
+        value == int(Wrap::MirroredRepeat))
+      return Wrap(value);
+    fail(element, "must be 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT)");
+  }
+
+  // ---- pass 4c: the node hierarchy ------------------------------------------------------------
+
+  glm::dmat4 localMatrix(size_t i) const {
+    const tinygltf::Node& n = model_.nodes[i];
+    std::string element = "nodes[" + std::to_string(i) + "]";
+    auto finite = [&](const std::vector<double>& v, const char* what) {
+      for (double x : v)
+        if (!std::isfinite(float(x))) fail(element + "." + what, "must be finite");
+    };
+    if (!n.matrix.empty()) {
+      if (n.matrix.size() != 16) fail(element + ".matrix", "must have 16 numbers");
+      finite(n.matrix, "matrix");
+      return glm::make_mat4(n.matrix.data());  // glTF matrices are column-major like GLM
+    }
+    glm::dmat4 m(1.0);
+    if (!n.translation.empty()) {
+      if (n.translation.size() != 3) fail(element + ".translation", "must have 3 numbers");
+      finite(n.translation, "translation");
+      m = glm::translate(m, glm::dvec3(n.translation[0], n.translation[1], n.translation[2]));
+    }
+    if (!n.rotation.empty()) {
+      if (n.rotation.size() != 4) fail(element + ".rotation", "must have 4 numbers (x, y, z, w)");
+      finite(n.rotation, "rotation");
+      glm::dquat q(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]);
+      double len = glm::length(q);
+      if (!(len > 1e-12)) fail(element + ".rotation", "is not a unit quaternion");
+      m = m * glm::mat4_cast(q / len);
+    }
+    if (!n.scale.empty()) {
+      if (n.scale.size() != 3) fail(element + ".scale", "must have 3 numbers");
+      finite(n.scale, "scale");
+      m = glm::scale(m, glm::dvec3(n.scale[0], n.scale[1], n.scale[2]));
+    }
+    return m;
+  }
+
+  void convertScene() {
+    size_t nodeCount = model_.nodes.size();
+    // Parents: glTF requires the node graph to be a forest (one parent at most).
+    std::vector<int> parent(nodeCount, -1);
+    for (size_t i = 0; i < nodeCount; ++i)
+      for (int c : model_.nodes[i].children) {
+        if (parent[size_t(c)] != -1 || size_t(c) == i)
+          fail("nodes[" + std::to_string(i) + "].children",
+               "nodes[" + std::to_string(c) + "] has more than one parent or is its own child");
+        parent[size_t(c)] = int(i);
+      }
+
+    std::vector<int> roots;
+    int sceneIndex = -1;
+    if (model_.defaultScene >= 0)
+      sceneIndex = model_.defaultScene;
+    else if (!model_.scenes.empty())
+      sceneIndex = 0;
+    if (sceneIndex >= 0) {
+      roots = model_.scenes[size_t(sceneIndex)].nodes;
+      for (int r : roots)
+        if (parent[size_t(r)] != -1)
+          fail("scenes[" + std::to_string(sceneIndex) + "].nodes",
+               "nodes[" + std::to_string(r) + "] is not a root node (it is a child of nodes[" +
+                   std::to_string(parent[size_t(r)]) + "])");
+    } else {
+      for (size_t i = 0; i < nodeCount; ++i)
+        if (parent[i] == -1) roots.push_back(int(i));
+    }
+
+    // Depth-first, iteratively; with single parents and root starts this visits each node
+    // once, and a cycle (nodes reachable only from each other) is never entered.
+    std::vector<bool> visited(nodeCount, false);
+    std::vector<std::pair<int, glm::dmat4>> stack;
+    for (auto it = roots.rbegin(); it != roots.rend(); ++it)
+      stack.emplace_back(*it, glm::dmat4(1.0));
+    std::vector<std::pair<int, glm::dmat4>> order;  // nodes in visit order with world matrices
+    while (!stack.empty()) {
+      auto [node, parentWorld] = stack.back();
+      stack.pop_back();
+      if (visited[size_t(node)])
+        fail(sceneIndex >= 0 ? "scenes[" + std::to_string(sceneIndex) + "].nodes" : "nodes",
+             "nodes[" + std::to_string(node) + "] is listed more than once");
+      visited[size_t(node)] = true;
+      glm::dmat4 world = parentWorld * localMatrix(size_t(node));
+      order.emplace_back(node, world);
+      const auto& children = model_.nodes[size_t(node)].children;
+      for (auto it = children.rbegin(); it != children.rend(); ++it) stack.emplace_back(*it, world);
+    }
+
+    for (const auto& [node, world] : order) convertNode(node, world);
+
+    if (defaultMaterialUsed_) {
+      Material m;
+      m.name = "default";
+      scene_.materials.push_back(m);  // glTF's default: white, metallic 1, roughness 1
+    }
+    if (sceneIndex >= 0) convertSceneExtras(sceneIndex);
+  }
+
+  std::string nodeName(int node) const {
+    const auto& n = model_.nodes[size_t(node)];
+    return n.name.empty() ? "nodes[" + std::to_string(node) + "]" : n.name;
+  }
+
+  void convertNode(int node, const glm::dmat4& world) {
+    const tinygltf::Node& n = model_.nodes[size_t(node)];
+    std::string element = "nodes[" + std::to_string(node) + "]";
+    ObjectSettings settings;
+    std::vector<vec3> probes;
+    bool hasProbes = false;
+    readNodeExtras(node, world, &settings, &probes, &hasProbes);
+
+    if (n.mesh >= 0) convertMesh(node, world, settings);
+    if (hasProbes) {
+      ProbeGroup g;
+      g.name = nodeName(node);
+      g.nodeIndex = node;
+      g.positions = std::move(probes);
+      scene_.probeGroups.push_back(std::move(g));
+    }
+    if (n.camera >= 0) convertCamera(node, world);
+    const Json& jn = array("nodes")[size_t(node)];
+    if (auto ext = jn.find("extensions"); ext != jn.end() && ext->is_object())
+      if (auto lp = ext->find("KHR_lights_punctual"); lp != ext->end())
+        convertLight(lp->at("light").get<int>(), node, world);
+  }
+
+  // ---- extras.kiln ------------------------------------------------------------------------------
+
+  // The extras.kiln object of a JSON element, or null when absent. `element` names it.
+  const Json* kilnExtras(const Json& obj, const std::string& element) const {
+    auto extras = obj.find("extras");
+    if (extras == obj.end() || !extras->is_object()) return nullptr;
+    auto kiln = extras->find("kiln");
+    if (kiln == extras->end()) return nullptr;
+    if (!kiln->is_object()) fail(element + ".extras.kiln", "must be an object");
+    return &*kiln;
+  }
+
+  // Typed readers for extras.kiln values; each fails naming the key.
+  struct Extras {
+    const Loader* loader;
+    const Json& obj;
+    std::string element;  // "...extras.kiln"
+    std::set<std::string> known;
+
+    const Json* find(const char* key) {
+      known.insert(key);
+      auto it = obj.find(key);
+      return it == obj.end() ? nullptr : &*it;
+    }
+    std::string where(const char* key) const { return element + "." + key; }
+    std::optional<bool> boolean(const char* key) {
+      const Json* v = find(key);
+      if (!v) return std::nullopt;
+      if (!v->is_boolean()) loader->fail(where(key), "must be true or false");
+      return v->get<bool>();
+    }
+    // A finite number in [lo, hi]; `range` describes it for the message.
+    std::optional<float> number(const char* key, double lo, double hi, const std::string& range,
+                                bool loExclusive = false) {
+      const Json* v = find(key);
+      if (!v) return std::nullopt;
+      double d = v->is_number() ? v->get<double>() : std::nan("");
+      if (!v->is_number() || !std::isfinite(float(d)) || d < lo || d > hi ||
+          (loExclusive && d == lo))
+        loader->fail(where(key), "must be a number " + range);
+      return float(d);
+    }
+    std::optional<int> integer(const char* key, int64_t lo, int64_t hi, const std::string& range) {
+      const Json* v = find(key);
+      if (!v) return std::nullopt;
+      bool integral = v->is_number_integer() ||
+                      (v->is_number_float() && std::floor(v->get<double>()) == v->get<double>() &&
+                       std::abs(v->get<double>()) < 1e15);
+      if (!integral) loader->fail(where(key), "must be an integer " + range);
+      int64_t i = v->is_number_float() ? int64_t(v->get<double>()) : v->get<int64_t>();
+      if (v->is_number_unsigned() && v->get<uint64_t>() > uint64_t(INT64_MAX)) i = INT64_MAX;
+      if (i < lo || i > hi) loader->fail(where(key), "must be an integer " + range);
+      return int(i);
+    }
+    std::optional<std::string> choice(const char* key, std::initializer_list<const char*> options) {
+      const Json* v = find(key);
+      if (!v) return std::nullopt;
+      std::string list;
+      bool match = false;
+      for (const char* o : options) {
+        list += std::string(list.empty() ? "" : " | ") + "\"" + o + "\"";
+        if (v->is_string() && v->get<std::string>() == o) match = true;
+      }
+      if (!match) loader->fail(where(key), "must be one of " + list);
+      return v->get<std::string>();
+    }
+    std::optional<std::string> string(const char* key) {
+      const Json* v = find(key);
+      if (!v) return std::nullopt;
+      if (!v->is_string() || v->get<std::string>().empty())
+        loader->fail(where(key), "must be a non-empty string");
+      return v->get<std::string>();
+    }
+    // Unknown keys are probably typos: say so instead of ignoring them silently.
+    void warnUnknown(Loader* l) const {
+      for (auto it = obj.begin(); it != obj.end(); ++it)
+        if (!known.count(it.key())) l->warn(element, "unknown key '" + it.key() + "' ignored");
+    }
+  };
+
+  static vec3 readVec3(const Loader* loader, const Json& v, const std::string& element,
+                       bool nonNegative) {
+    if (!v.is_array() || v.size() != 3)
+      loader->fail(element, std::string("must be an array of 3 ") +
+                                (nonNegative ? "numbers >= 0" : "numbers"));
+    vec3 out;
+    for (int c = 0; c < 3; ++c) {
+      if (!v[size_t(c)].is_number()) loader->fail(element, "must be an array of 3 numbers");
+      out[c] = float(v[size_t(c)].get<double>());
+      if (!std::isfinite(out[c]) || (nonNegative && out[c] < 0.0f))
+        loader->fail(element, nonNegative ? "must be finite numbers >= 0" : "must be finite");
+    }
+    return out;
+  }
+
+  void readNodeExtras(int node, const glm::dmat4& world, ObjectSettings* settings,
+                      std::vector<vec3>* probes, bool* hasProbes) {
+    std::string element = "nodes[" + std::to_string(node) + "]";
+    const Json* k = kilnExtras(array("nodes")[size_t(node)], element);
+    if (!k) return;
+    Extras e{this, *k, element + ".extras.kiln", {}};
+    if (auto v = e.boolean("static")) settings->isStatic = *v;
+    if (auto v = e.number("scaleInLightmap", 0.0, 1e9, ">= 0")) settings->scaleInLightmap = *v;
+    if (auto v = e.choice("receiveGI", {"lightmaps", "probes"}))
+      settings->receiveGI = *v == "probes" ? ReceiveGI::Probes : ReceiveGI::Lightmaps;
+    if (auto v = e.boolean("lppv")) settings->lppv = *v;
+    if (const Json* p = e.find("probes")) {
+      if (!p->is_array()) fail(e.where("probes"), "must be an array of [x, y, z] positions");
+      *hasProbes = true;
+      for (size_t i = 0; i < p->size(); ++i) {
+        vec3 local =
+            readVec3(this, (*p)[i], e.where("probes") + "[" + std::to_string(i) + "]", false);
+        glm::dvec4 w = world * glm::dvec4(glm::dvec3(local), 1.0);
+        vec3 pw(w);
+        if (!isFinite(pw))
+          fail(e.where("probes") + "[" + std::to_string(i) + "]", "is not finite in world space");
+        probes->push_back(pw);
+      }
+    }
+    e.warnUnknown(this);
+  }
+
+  void convertSceneExtras(int sceneIndex) {
+    std::string element = "scenes[" + std::to_string(sceneIndex) + "]";
+    const Json* k = kilnExtras(array("scenes")[size_t(sceneIndex)], element);
+    if (!k) return;
+    Extras e{this, *k, element + ".extras.kiln", {}};
+    SceneSettings& s = scene_.settings;
+    s.lightingMode = e.choice("lightingMode", {"baked-indirect", "shadowmask", "subtractive"});
+    s.lightmapResolution = e.number("lightmapResolution", 0.0, 1e6, "> 0", true);
+    s.lightmapPadding = e.integer("lightmapPadding", 0, 1024, "in [0, 1024]");
+    s.lightmapMaxSize = e.integer("lightmapMaxSize", 1, 65536, "in [1, 65536]");
+    s.directionalMode = e.choice("directionalMode", {"non-directional", "directional", "sh"});
+    s.bounces = e.integer("bounces", 0, 1000, "in [0, 1000]");
+    s.albedoBoost = e.number("albedoBoost", 0.0, 1e3, "> 0", true);
+    s.indirectIntensity = e.number("indirectIntensity", 0.0, 1e6, ">= 0");
+    s.ambientOcclusion = e.boolean("ambientOcclusion");
+    s.aoMaxDistance = e.number("aoMaxDistance", 0.0, 1e9, ">= 0");
+    s.aoAmount = e.number("aoAmount", 0.0, 1e3, ">= 0");
+    // Preset names belong to the tools that apply them; here only the type is checked.
+    s.quality = e.string("quality");
+    if (const Json* sky = e.find("sky")) convertSky(*sky, e.where("sky"));
+    e.warnUnknown(this);
+  }
+
+  void convertSky(const Json& sky, const std::string& element) {
+    if (!sky.is_object()) fail(element, "must be an object with 'color' or 'map'");
+    Extras e{this, sky, element, {}};
+    const Json* color = e.find("color");
+    auto map = e.string("map");
+    auto intensity = e.number("intensity", 0.0, 1e9, ">= 0");
+    auto rotation = e.number("rotation", -1e6, 1e6, "(degrees)");
+    e.warnUnknown(this);
+    if (color && map) fail(element, "has both 'color' and 'map'");
+    if (color) {
+      // "intensity" scales a constant colour too, so both kinds of sky read the same way.
+      vec3 c = readVec3(this, *color, element + ".color", true);
+      scene_.sky = Sky::constant(c * intensity.value_or(1.0f));
+      return;
+    }
+    if (!map) fail(element, "needs 'color' or 'map'");
+    if (!options_.loadSkyMap) return;
+    std::string file = (fs::path(baseDir_) / *map).string();
+    Result<Sky> loaded = Sky::fromFile(file, intensity.value_or(1.0f), rotation.value_or(0.0f));
+    if (!loaded) fail(element + ".map", "cannot load '" + *map + "': " + loaded.error());
+    scene_.sky = std::move(loaded).value();
+  }
+
+  // ---- lights and cameras -----------------------------------------------------------------------
+
+  void convertLight(int index, int node, const glm::dmat4& world) {
+    const Json& jl = doc_.at("extensions").at("KHR_lights_punctual").at("lights").at(size_t(index));
+    std::string element = "extensions.KHR_lights_punctual.lights[" + std::to_string(index) + "]";
+    if (!jl.is_object()) fail(element, "must be an object");
+    Light l;
+    l.lightIndex = index;
+    l.nodeIndex = node;
+    Extras e{this, jl, element, {}};
+    auto type = e.choice("type", {"directional", "point", "spot"});
+    if (!type) fail(element, "missing required 'type'");
+    l.type = *type == "directional" ? LightType::Directional
+             : *type == "spot"      ? LightType::Spot
+                                    : LightType::Point;
+    if (const Json* name = e.find("name"); name && name->is_string())
+      l.name = name->get<std::string>();
+    if (l.name.empty()) l.name = "lights[" + std::to_string(index) + "]";
+    if (const Json* c = e.find("color")) l.color = readVec3(this, *c, element + ".color", true);
+    if (auto v = e.number("intensity", 0.0, 1e30, ">= 0")) l.intensity = *v;
+    if (auto v = e.number("range", 0.0, 1e30, ">= 0 (0 = unlimited)")) l.range = *v;
+    if (l.type == LightType::Spot) {
+      const Json* spot = e.find("spot");
+      if (!spot || !spot->is_object()) fail(element + ".spot", "missing or not an object");
+      Extras s{this, *spot, element + ".spot", {}};
+      if (auto v = s.number("innerConeAngle", 0.0, kPi / 2, "in [0, pi/2]")) l.innerConeAngle = *v;
+      if (auto v = s.number("outerConeAngle", 0.0, kPi / 2, "in (0, pi/2]", true))
+        l.outerConeAngle = *v;
+      if (l.innerConeAngle >= l.outerConeAngle)
+        fail(element + ".spot", "innerConeAngle must be smaller than outerConeAngle");
+    }
+    l.position = vec3(world[3]);
+    glm::dvec3 dir = glm::dvec3(world * glm::dvec4(0.0, 0.0, -1.0, 0.0));
+    if (!(glm::length(dir) > 1e-12) || !isFinite(vec3(dir)) || !isFinite(l.position))
+      fail("nodes[" + std::to_string(node) + "]", "light transform is degenerate");
+    l.direction = vec3(glm::normalize(dir));
+
+    if (const Json* k = kilnExtras(jl, element)) {
+      Extras x{this, *k, element + ".extras.kiln", {}};
+      if (auto m = x.choice("mode", {"baked", "mixed", "realtime"}))
+        l.mode = *m == "mixed"      ? LightMode::Mixed
+                 : *m == "realtime" ? LightMode::Realtime
+                                    : LightMode::Baked;
+      if (auto v = x.number("bounceIntensity", 0.0, 1e6, ">= 0")) l.bounceIntensity = *v;
+      if (auto v = x.number("shadowRadius", 0.0, 1e9, ">= 0")) l.shadowRadius = *v;
+      if (auto v = x.number("shadowAngle", 0.0, 90.0, "in [0, 90] (degrees)")) l.shadowAngle = *v;
+      if (auto v = x.integer("shadowSamples", 1, 65536, "in [1, 65536]")) l.shadowSamples = *v;
+      x.warnUnknown(this);
+    }
+    scene_.lights.push_back(std::move(l));
+  }
+
+  void convertCamera(int node, const glm::dmat4& world) {
+    int index = model_.nodes[size_t(node)].camera;
+    const tinygltf::Camera& c = model_.cameras[size_t(index)];
+    std::string element = "cameras[" + std::to_string(index) + "]";
+    Camera cam;
+    cam.name = !c.name.empty() ? c.name : nodeName(node);
+    cam.nodeIndex = node;
+    auto positive = [&](double v, const char* what, bool allowZero) {
+      if (!std::isfinite(float(v)) || v < 0.0 || (!allowZero && v == 0.0))
+        fail(element + "." + what,
+             allowZero ? "must be finite and >= 0" : "must be finite and > 0");
+      return float(v);
+    };
+    if (c.type == "perspective") {
+      cam.perspective = true;
+      cam.yfov = positive(c.perspective.yfov, "perspective.yfov", false);
+      cam.aspectRatio = positive(c.perspective.aspectRatio, "perspective.aspectRatio", true);
+      cam.znear = positive(c.perspective.znear, "perspective.znear", false);
+      cam.zfar = positive(c.perspective.zfar, "perspective.zfar", true);
+    } else if (c.type == "orthographic") {
+      cam.perspective = false;
+      cam.xmag = std::abs(float(c.orthographic.xmag));
+      cam.ymag = std::abs(float(c.orthographic.ymag));
+      if (!(cam.xmag > 0.0f) || !(cam.ymag > 0.0f) || !std::isfinite(cam.xmag) ||
+          !std::isfinite(cam.ymag))
+        fail(element + ".orthographic", "xmag and ymag must be finite and non-zero");
+      cam.znear = positive(c.orthographic.znear, "orthographic.znear", true);
+      cam.zfar = positive(c.orthographic.zfar, "orthographic.zfar", true);
+    } else {
+      fail(element + ".type", "must be \"perspective\" or \"orthographic\"");
+    }
+    cam.worldFromCamera = mat4(world);
+    scene_.cameras.push_back(std::move(cam));
+  }
+
+  // ---- meshes -----------------------------------------------------------------------------------
+
+  void convertMesh(int node, const glm::dmat4& world, const ObjectSettings& settings) {
+    const tinygltf::Node& n = model_.nodes[size_t(node)];
+    const tinygltf::Mesh& mesh = model_.meshes[size_t(n.mesh)];
+    std::string meshElement = "meshes[" + std::to_string(n.mesh) + "]";
+    std::string meshLabel =
+        mesh.name.empty() ? meshElement : "'" + mesh.name + "' (" + meshElement + ")";
+
+    mat4 positionMatrix(world);
+    mat3 linear(world);
+    float det = glm::determinant(linear);
+    // Normals go by the inverse transpose: the cofactor matrix / det. Only its direction
+    // matters, so the cofactor times sign(det) also works for singular (det = 0) transforms.
+    mat3 cofactor(glm::cross(linear[1], linear[2]), glm::cross(linear[2], linear[0]),
+                  glm::cross(linear[0], linear[1]));
+    mat3 normalMatrix = det < 0.0f ? -cofactor : cofactor;
+    bool flip = det < 0.0f;  // a mirroring transform turns CCW into CW: flip to keep fronts
+
+    Object obj;
+    obj.name = nodeName(node);
+    obj.nodeIndex = node;
+    obj.meshIndex = n.mesh;
+    obj.settings = settings;
+
+    DropCounts drops;
+    std::vector<PrimitiveGeometry> prims;
+    for (size_t j = 0; j < mesh.primitives.size(); ++j) {
+      std::string element = meshElement + ".primitives[" + std::to_string(j) + "]";
+      prims.push_back(convertPrimitive(mesh.primitives[j], element, positionMatrix, normalMatrix,
+                                       flip, &drops));
+    }
+
+    bool anyUv0 = false, allUv0 = true, anyUv1 = false, allUv1 = true;
+    for (const auto& p : prims) {
+      anyUv0 |= p.hasUv0;
+      allUv0 &= p.hasUv0;
+      anyUv1 |= p.hasUv1;
+      allUv1 &= p.hasUv1;
+    }
+    for (auto& p : prims) {
+      uint32_t base = uint32_t(obj.positions.size());
+      obj.positions.insert(obj.positions.end(), p.positions.begin(), p.positions.end());
+      obj.normals.insert(obj.normals.end(), p.normals.begin(), p.normals.end());
+      if (anyUv0) {
+        if (!p.hasUv0) p.uv0.assign(p.positions.size(), vec2(0.0f));
+        obj.uv0.insert(obj.uv0.end(), p.uv0.begin(), p.uv0.end());
+      }
+      if (anyUv1) {
+        if (!p.hasUv1) p.uv1.assign(p.positions.size(), vec2(0.0f));
+        obj.uv1.insert(obj.uv1.end(), p.uv1.begin(), p.uv1.end());
+      }
+      for (uvec3 t : p.triangles) {
+        obj.triangles.push_back(t + uvec3(base));
+        obj.triangleMaterial.push_back(p.material);
+      }
+    }
+
+    std::string who = "nodes[" + std::to_string(node) + "] '" + obj.name + "'";
+    if (anyUv0 && !allUv0)
+      warn(who,
+           "mesh " + meshLabel + ": TEXCOORD_0 missing on some primitives, filled with (0, 0)");
+    if (anyUv1 && !allUv1)
+      warn(who,
+           "mesh " + meshLabel + ": TEXCOORD_1 missing on some primitives, filled with (0, 0)");
+    if (drops.generatedNormals)
+      warn(who, "mesh " + meshLabel +
+                    " has no NORMAL, generated area- and angle-weighted vertex normals");
+    if (drops.badNormals)
+      warn(who, "mesh " + meshLabel + ": replaced " + std::to_string(drops.badNormals) +
+                    " zero or non-finite normals with generated ones");
+    if (drops.nonFinite || drops.degenerate)
+      warn(who, "mesh " + meshLabel + ": dropped " + std::to_string(drops.nonFinite) +
+                    " triangle(s) with NaN/Inf positions and " + std::to_string(drops.degenerate) +
+                    " zero-area triangle(s)");
+    scene_.objects.push_back(std::move(obj));
+  }
+
+  PrimitiveGeometry convertPrimitive(const tinygltf::Primitive& prim, const std::string& element,
+                                     const mat4& positionMatrix, const mat3& normalMatrix,
+                                     bool flip, DropCounts* drops) {
+    int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+    if (mode >= TINYGLTF_MODE_POINTS && mode <= TINYGLTF_MODE_LINE_STRIP)
+      fail(element, std::string("mode ") + modeName(mode) +
+                        " is not supported (kiln needs triangles, strips or fans)");
+    if (mode > TINYGLTF_MODE_TRIANGLE_FAN) fail(element + ".mode", "must be in [0, 6]");
+
+    auto attribute = [&](const char* name) {
+      auto it = prim.attributes.find(name);
+      return it == prim.attributes.end() ? -1 : it->second;
+    };
+    int posAccessor = attribute("POSITION");
+    if (posAccessor < 0) fail(element, "has no POSITION attribute");
+    std::vector<double> pos = readAccessor(posAccessor, 3, element + " POSITION");
+    size_t vertexCount = pos.size() / 3;
+    auto sameCount = [&](int accessor, const char* name) {
+      if (model_.accessors[size_t(accessor)].count != vertexCount)
+        fail(element, std::string(name) + " (accessors[" + std::to_string(accessor) + "]) has " +
+                          std::to_string(model_.accessors[size_t(accessor)].count) +
+                          " elements, POSITION has " + std::to_string(vertexCount));
+    };
+
+    PrimitiveGeometry g;
+    g.material = prim.material >= 0 ? uint32_t(prim.material) : defaultMaterialIndex();
+
+    // Vertex indices, then triangles in the primitive's own numbering.
+    std::vector<uint32_t> indices;
+    if (prim.indices >= 0) {
+      const auto& a = model_.accessors[size_t(prim.indices)];
+      std::string where = "accessors[" + std::to_string(prim.indices) + "]";
+      if (a.type != TINYGLTF_TYPE_SCALAR || a.normalized ||
+          (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+           a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+           a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
+        fail(where, "indices of " + element + " must be SCALAR unsigned byte/short/int");
+      std::vector<double> raw = readAccessor(prim.indices, 1, element + " indices");
+      indices.reserve(raw.size());
+      for (size_t k = 0; k < raw.size(); ++k) {
+        if (raw[k] >= double(vertexCount))
+          fail(element, "indices (" + where + ") [" + std::to_string(k) +
+                            "] = " + std::to_string(uint64_t(raw[k])) + " >= vertex count " +
+                            std::to_string(vertexCount));
+        indices.push_back(uint32_t(raw[k]));
+      }
+    } else {
+      indices.resize(vertexCount);
+      for (size_t k = 0; k < vertexCount; ++k) indices[k] = uint32_t(k);
+    }
+    std::vector<uvec3> tris;
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+      for (size_t k = 0; k + 2 < indices.size(); k += 3)
+        tris.emplace_back(indices[k], indices[k + 1], indices[k + 2]);
+    } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+      // glTF 2.0 spec, "Topology types": odd triangles swap their first two vertices so that
+      // every triangle keeps the strip's winding.
+      for (size_t k = 0; k + 2 < indices.size(); ++k)
+        tris.push_back(k % 2 == 0 ? uvec3(indices[k], indices[k + 1], indices[k + 2])
+                                  : uvec3(indices[k + 1], indices[k], indices[k + 2]));
+    } else {
+      for (size_t k = 1; k + 1 < indices.size(); ++k)
+        tris.emplace_back(indices[k], indices[k + 1], indices[0]);
+    }
+
+    // World positions.
+    std::vector<vec3> positions(vertexCount);
+    for (size_t v = 0; v < vertexCount; ++v) {
+      vec3 p(float(pos[3 * v]), float(pos[3 * v + 1]), float(pos[3 * v + 2]));
+      positions[v] = vec3(positionMatrix * vec4(p, 1.0f));
+    }
+    pos = {};
+
+    // Drop triangles kiln cannot use, then keep only the vertices still referenced.
+    std::vector<uvec3> kept;
+    kept.reserve(tris.size());
+    for (uvec3 t : tris) {
+      if (flip) std::swap(t.y, t.z);
+      vec3 a = positions[t.x], b = positions[t.y], c = positions[t.z];
+      if (!isFinite(a) || !isFinite(b) || !isFinite(c)) {
+        ++drops->nonFinite;
+        continue;
+      }
+      // Zero area relative to the triangle's size (float cross products are noise below
+      // ~1e-7 of the edge lengths squared), which also catches repeated indices.
+      float maxEdge2 =
+          std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)});
+      float cross = glm::length(glm::cross(b - a, c - a));
+      if (!(cross > 1e-7f * maxEdge2) || !std::isfinite(cross)) {
+        ++drops->degenerate;
+        continue;
+      }
+      kept.push_back(t);
+    }
+    std::vector<uint32_t> remap(vertexCount, UINT32_MAX);
+    std::vector<uint32_t> used;
+    {
+      std::vector<bool> referenced(vertexCount, false);
+      for (uvec3 t : kept) referenced[t.x] = referenced[t.y] = referenced[t.z] = true;
+      for (size_t v = 0; v < vertexCount; ++v)
+        if (referenced[v]) {
+          remap[v] = uint32_t(used.size());
+          used.push_back(uint32_t(v));
+        }
+    }
+    for (uvec3& t : kept) t = uvec3(remap[t.x], remap[t.y], remap[t.z]);
+    g.triangles = std::move(kept);
+    g.positions.resize(used.size());
+    for (size_t v = 0; v < used.size(); ++v) g.positions[v] = positions[used[v]];
+
+    // Normals: transformed when given, generated when missing or unusable.
+    std::vector<bool> needsNormal(used.size(), true);
+    g.normals.assign(used.size(), vec3(0.0f));
+    int normalAccessor = attribute("NORMAL");
+    if (normalAccessor >= 0) {
+      sameCount(normalAccessor, "NORMAL");
+      std::vector<double> nrm = readAccessor(normalAccessor, 3, element + " NORMAL");
+      for (size_t v = 0; v < used.size(); ++v) {
+        size_t s = used[v];
+        vec3 nw =
+            normalMatrix * vec3(float(nrm[3 * s]), float(nrm[3 * s + 1]), float(nrm[3 * s + 2]));
+        float len = glm::length(nw);
+        if (len > 0.0f && std::isfinite(len)) {
+          g.normals[v] = nw / len;
+          needsNormal[v] = false;
+        } else {
+          ++drops->badNormals;
+        }
+      }
+    } else {
+      drops->generatedNormals = !used.empty() || drops->generatedNormals;
+    }
+    if (std::find(needsNormal.begin(), needsNormal.end(), true) != needsNormal.end())
+      generateNormals(g, needsNormal);
+
+    g.hasUv0 = readUv(attribute("TEXCOORD_0"), "TEXCOORD_0", element, used, vertexCount, &g.uv0);
+    g.hasUv1 = readUv(attribute("TEXCOORD_1"), "TEXCOORD_1", element, used, vertexCount, &g.uv1);
+    return g;
+  }
+
+  bool readUv(int accessor, const char* name, const std::string& element,
+              const std::vector<uint32_t>& used, size_t vertexCount, std::vector<vec2>* out) {
+    if (accessor < 0) return false;
+    if (model_.accessors[size_t(accessor)].count != vertexCount)
+      fail(element, std::string(name) + " (accessors[" + std::to_string(accessor) + "]) has " +
+                        std::to_string(model_.accessors[size_t(accessor)].count) +
+                        " elements, POSITION has " + std::to_string(vertexCount));
+    std::vector<double> uv = readAccessor(accessor, 2, element + " " + name);
+    out->resize(used.size());
+    for (size_t v = 0; v < used.size(); ++v) {
+      vec2 t(float(uv[2 * used[v]]), float(uv[2 * used[v] + 1]));
+      (*out)[v] = std::isfinite(t.x) && std::isfinite(t.y) ? t : vec2(0.0f);
+    }
+    return true;
+  }
+
+  // Vertex normals weighted by each corner's angle times its triangle's area (the cross
+  // product's length), from the world-space, front-facing triangles; a vertex whose
+  // contributions cancel takes the normal of its first triangle.
+  static void generateNormals(PrimitiveGeometry& g, const std::vector<bool>& needs) {
+    std::vector<glm::dvec3> sum(g.positions.size(), glm::dvec3(0.0));
+    std::vector<vec3> first(g.positions.size(), vec3(0.0f));
+    for (uvec3 t : g.triangles) {
+      vec3 p[3] = {g.positions[t.x], g.positions[t.y], g.positions[t.z]};
+      vec3 face = glm::cross(p[1] - p[0], p[2] - p[0]);
+      vec3 unit = glm::normalize(face);
+      for (int c = 0; c < 3; ++c) {
+        vec3 e1 = glm::normalize(p[(c + 1) % 3] - p[c]);
+        vec3 e2 = glm::normalize(p[(c + 2) % 3] - p[c]);
+        double angle = std::acos(std::clamp(double(glm::dot(e1, e2)), -1.0, 1.0));
+        sum[t[c]] += glm::dvec3(face) * angle;
+        if (first[t[c]] == vec3(0.0f)) first[t[c]] = unit;
+      }
+    }
+    for (size_t v = 0; v < g.positions.size(); ++v) {
+      if (!needs[v]) continue;
+      double len = glm::length(sum[v]);
+      g.normals[v] = len > 1e-30 ? vec3(sum[v] / len) : first[v];
+      if (g.normals[v] == vec3(0.0f)) g.normals[v] = vec3(0.0f, 1.0f, 0.0f);
+    }
+  }
+
+  uint32_t defaultMaterialIndex() {
+    defaultMaterialUsed_ = true;
+    return uint32_t(model_.materials.size());  // appended after the file's materials
+  }
+
+  std::string path_;
+  LoadOptions options_;
+  std::string baseDir_;
+  std::vector<uint8_t> bytes_;
+  bool isGlb_ = false;
+  uint64_t glbBinSize_ = 0;
+  Json doc_;
+  std::vector<uint64_t> bufferLengths_;
+  tinygltf::Model model_;
+  std::map<int, int> textureMap_;
+  bool defaultMaterialUsed_ = false;
+  Scene scene_;
+};
+
+}  // namespace
+
+Result<Scene> loadScene(const std::string& path, const LoadOptions& options) {
+  try {
+    return Loader(path, options).load();
+  } catch (const LoadFailure& f) {
+    return Error{f.message};
+  } catch (const std::bad_alloc&) {
+    return Error{path + ": out of memory while loading"};
+  } catch (const std::exception& e) {
+    // tinygltf's JSON layer and the standard library may throw on input we did not foresee.
+    return Error{path + ": " + e.what()};
+  }
+}
+
+}  // namespace kiln
