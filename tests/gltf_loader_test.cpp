@@ -171,12 +171,17 @@ class GltfLoaderTest : public ::testing::Test {
     return r.ok() ? std::move(r).value() : Scene{};
   }
   // Loads `path`, expects failure, and checks the message starts with the path and names
-  // every one of `elements`.
+  // every one of `elements`; then checks that `kiln info` exits with 1 and prints it.
   void expectError(const std::string& path, std::initializer_list<std::string> elements) {
     Result<Scene> r = loadScene(path);
     ASSERT_FALSE(r.ok()) << "loaded " << path << " but should have failed";
     EXPECT_EQ(r.error().rfind(path + ": ", 0), 0u) << r.error();
     for (const auto& e : elements) EXPECT_NE(r.error().find(e), std::string::npos) << r.error();
+    // The CLI reports the same input as bad input: exit code 1, the message on stderr.
+    std::string output;
+    int code = test::runCommand(std::string(test::kilnExe()) + " info '" + path + "'", &output);
+    EXPECT_EQ(code, 1) << output;
+    EXPECT_NE(output.find("kiln: error: " + path + ": "), std::string::npos) << output;
   }
   std::string dir;
 };
