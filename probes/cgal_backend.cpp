@@ -1,0 +1,74 @@
+// cgal_backend.cpp: Delaunay triangulations with CGAL (the second backend, and the 2D fallback
+// for coplanar probes). Exact_predicates_inexact_constructions_kernel gives exact predicates,
+// so the triangulation is valid for any input; each vertex carries its input index as info.
+// The only translation unit that includes CGAL (it is heavy to compile).
+#include <exception>
+#include <string>
+#include <utility>
+
+#include <CGAL/Delaunay_triangulation_2.h>
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_3.h>
+
+#include "probes/delaunay_backends.h"
+
+namespace kiln::detail {
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Vb3 = CGAL::Triangulation_vertex_base_with_info_3<int32_t, Kernel>;
+using Tds3 = CGAL::Triangulation_data_structure_3<Vb3>;
+using Delaunay3 = CGAL::Delaunay_triangulation_3<Kernel, Tds3>;
+using Vb2 = CGAL::Triangulation_vertex_base_with_info_2<int32_t, Kernel>;
+using Tds2 = CGAL::Triangulation_data_structure_2<Vb2>;
+using Delaunay2 = CGAL::Delaunay_triangulation_2<Kernel, Tds2>;
+
+}  // namespace
+
+Result<Tets> cgalDelaunay3(std::span<const glm::dvec3> points) {
+  try {
+    std::vector<std::pair<Kernel::Point_3, int32_t>> input;
+    input.reserve(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+      input.emplace_back(Kernel::Point_3(points[i].x, points[i].y, points[i].z), int32_t(i));
+    }
+    Delaunay3 dt(input.begin(), input.end());
+    if (dt.dimension() != 3) {
+      return Error{"CGAL: triangulation has dimension " + std::to_string(dt.dimension())};
+    }
+    Tets tets;
+    tets.reserve(dt.number_of_finite_cells());
+    for (auto c : dt.finite_cell_handles()) {
+      tets.push_back({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
+                      c->vertex(3)->info()});
+    }
+    return tets;
+  } catch (const std::exception& e) {
+    return Error{std::string("CGAL Delaunay_triangulation_3 failed: ") + e.what()};
+  }
+}
+
+Result<Triangles> cgalDelaunay2(std::span<const glm::dvec2> points) {
+  try {
+    std::vector<std::pair<Kernel::Point_2, int32_t>> input;
+    input.reserve(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+      input.emplace_back(Kernel::Point_2(points[i].x, points[i].y), int32_t(i));
+    }
+    Delaunay2 dt(input.begin(), input.end());
+    if (dt.dimension() != 2) {
+      return Error{"CGAL: 2D triangulation has dimension " + std::to_string(dt.dimension())};
+    }
+    Triangles tris;
+    for (auto f : dt.finite_face_handles()) {
+      tris.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
+    }
+    return tris;
+  } catch (const std::exception& e) {
+    return Error{std::string("CGAL Delaunay_triangulation_2 failed: ") + e.what()};
+  }
+}
+
+}  // namespace kiln::detail

@@ -1,0 +1,31 @@
+// delaunay_backends.h: the Delaunay libraries behind buildProbeTopology (private to probes/).
+// Each takes points exactly as the probe positions (floats widened to double) and returns
+// cells as indices into `points`, in the library's own order and orientation; the caller
+// makes them canonical. Errors come back as messages, never as exceptions.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "src/result.h"
+
+namespace kiln::detail {
+
+using Tets = std::vector<std::array<int32_t, 4>>;
+using Triangles = std::vector<std::array<int32_t, 3>>;
+
+// TetGen 1.5, switches "Qz": Delaunay tetrahedralization of the point set (no "p", so no PLC
+// and no Steiner points; no "q"), quiet, zero-based numbering.
+Result<Tets> tetgenDelaunay3(std::span<const glm::dvec3> points);
+
+// CGAL Delaunay_triangulation_3 with Exact_predicates_inexact_constructions_kernel.
+Result<Tets> cgalDelaunay3(std::span<const glm::dvec3> points);
+
+// CGAL Delaunay_triangulation_2 (the fallback for coplanar probes), counter-clockwise faces.
+Result<Triangles> cgalDelaunay2(std::span<const glm::dvec2> points);
+
+}  // namespace kiln::detail

@@ -1,0 +1,57 @@
+// probe_runtime.h: finding the probes around a point and blending their SH at run time.
+//
+// locateProbe walks from a caller-owned hint cell (e.g. last frame's cell for the object) to
+// the cell containing the point, crossing each time the face with the most negative
+// barycentric coordinate (Cupisz, GDC 2012); without a hint it starts from the seed grid.
+// Outside the hull the outer cells extrapolate continuously, so a lookup always succeeds.
+// Everything here reads a const ProbeSet: safe from many threads, no allocation per query.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+
+#include <glm/glm.hpp>
+
+#include "kiln/probe_set.h"
+
+namespace kiln {
+
+// Where a point is: the cell, its probes and their weights (>= 0, summing to 1). Slots a cell
+// does not use (outer cells, lower dimensions) repeat probes[0] with weight 0, so a caller may
+// blend all four blindly.
+struct ProbeLocation {
+  int32_t cell = -1;                // pass back as the next hint
+  std::array<int32_t, 4> probes{};  // indices into ProbeSet::positions / sh
+  std::array<float, 4> weights{};
+  uint16_t steps = 0;               // cells visited by the walk (diagnostics)
+  bool bruteForce = false;          // the walk gave up and a scan of all cells was used
+};
+
+// Cells a walk may visit before it falls back to scanning every cell.
+inline constexpr int kMaxWalkSteps = 4096;
+
+// Locates p (world space). `hint` is any cell index or -1; an out-of-range hint is ignored.
+// Returns cell = -1 only for an empty ProbeSet.
+ProbeLocation locateProbe(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+
+// sum_k weights[k] * sh[probes[k]]: radiance SH at the located point.
+ShL2Rgb interpolateProbes(const ProbeSet& set, const ProbeLocation& location) noexcept;
+
+// Radiance SH at p (locate + interpolate).
+ShL2Rgb sampleProbes(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+
+// Irradiance E (not E / pi) for unit normal n from radiance SH (Ramamoorthi and Hanrahan
+// 2001; see src/sh.h).
+inline glm::vec3 probeIrradiance(const ShL2Rgb& sh, glm::vec3 n) noexcept {
+  return sh.irradiance(n);
+}
+
+// Batch forms. `hints` is empty or has points.size() entries: each entry is read as the hint
+// for its point and overwritten with the cell found. `out` must have points.size() entries.
+void locateProbes(const ProbeSet& set, std::span<const glm::vec3> points,
+                  std::span<int32_t> hints, std::span<ProbeLocation> out) noexcept;
+void sampleProbes(const ProbeSet& set, std::span<const glm::vec3> points,
+                  std::span<int32_t> hints, std::span<ShL2Rgb> out) noexcept;
+
+}  // namespace kiln

@@ -1,0 +1,119 @@
+// probe_set.h: the runtime light-probe data (flat arrays, as Godot's LightmapGI stores them)
+// and the .kprobe file that carries it from the bake to a game.
+//
+// Layout (Cupisz, "Light probe interpolation using tetrahedral tessellations", GDC 2012):
+// the probes are tetrahedralized (Delaunay); every triangle of the convex hull gets an "outer
+// cell" that reaches to infinity, swept along the hull's vertex normals, so every point of
+// space lies in exactly one cell and extrapolation outside the hull is continuous.
+// Degenerate probe sets use the same arrays with a lower `dimension` (see ProbeSet).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "src/result.h"
+#include "src/sh.h"
+
+namespace kiln {
+
+// Extrapolation data of one outer cell (hull triangle A, B, C, outward-wound).
+// For a point p outside, Cupisz finds t >= 0 such that p lies in the plane of the triangle
+// A + t nA, B + t nB, C + t nC; that condition is the cubic a t^3 + b t^2 + c t + d = 0 whose
+// coefficients are affine in q = p - A: (a, b, c, d)[i] = dot(cubic[i].xyz, q) + cubic[i].w.
+// Dimension 2 (hull edges) uses normals[0] for the unit normal of the probes' plane (the same
+// in every outer cell) and normals[1] for the edge's outward normal in that plane.
+struct OuterCell {
+  std::array<glm::vec3, 3> normals{};  // unit hull vertex normals of the cell's 3 probes
+  std::array<glm::vec4, 4> cubic{};    // rows for a, b, c, d (see above)
+};
+
+// Uniform grid of seed cells over the probe bounds: the walk starts from seeds[cell of p]
+// when the caller has no hint. Points outside the bounds use the nearest grid cell.
+struct ProbeSeedGrid {
+  glm::vec3 min{0.0f};
+  glm::vec3 max{0.0f};
+  glm::ivec3 size{0};            // grid cells per axis (0 when there is no grid)
+  std::vector<int32_t> seeds;    // size.x * size.y * size.z cell indices, x fastest
+};
+
+// All runtime probe data. Positions are in glTF world space (metres); `sh` holds RADIANCE
+// SH in kiln's basis (src/sh.h). Plain data: const access from many threads is safe.
+//
+// Cells by `dimension`:
+//  3: cells [0, innerCellCount) are tetrahedra {p0, p1, p2, p3} with orient3d > 0; cells
+//     [innerCellCount, size) are outer cells {a, b, c, -1}, a hull triangle wound so that
+//     cross(b - a, c - a) points out of the hull. neighbours[c][k] is the cell across the face
+//     opposite vertex k; for an outer cell, k = 3 (opposite the "vertex at infinity") is the
+//     tetrahedron inside the hull, k < 3 the outer cell across the swept hull edge.
+//  2: probes all lie in one plane. Inner cells are triangles {a, b, c, -1} (2D Delaunay in the
+//     plane, wound alike), outer cells are hull edges {a, b, -1, -1}; neighbours[k] for k < 3
+//     as above, and neighbours[2] of a hull edge is its triangle. Queries are projected onto
+//     the plane; outside the hull they take the nearest point of the hull boundary.
+//  1: probes all lie on one line. Cells are segments {a, b, -1, -1} ordered along the line;
+//     neighbours {next, previous, -1, -1}. Queries are projected on the line and clamped.
+//  0: a single distinct position: one cell {probe, -1, -1, -1}; every query gets that probe.
+// Probes merged into another (near-duplicates) keep their slot in `positions` and `sh` but
+// appear in no cell.
+struct ProbeSet {
+  int32_t dimension = 3;
+  std::vector<glm::vec3> positions;
+  std::vector<ShL2Rgb> sh;
+  std::vector<float> validity;  // per probe, 1 = valid, 0 = inside geometry (DDGI-style)
+  std::vector<glm::ivec4> cells;
+  std::vector<glm::ivec4> neighbours;
+  int32_t innerCellCount = 0;
+  std::vector<OuterCell> outerCells;  // cells.size() - innerCellCount entries
+  ProbeSeedGrid grid;
+
+  int32_t probeCount() const { return int32_t(positions.size()); }
+  int32_t cellCount() const { return int32_t(cells.size()); }
+  bool isOuter(int32_t cell) const { return cell >= innerCellCount; }
+};
+
+// Fills outerCells[i].cubic from the cells' triangles and outerCells[i].normals (dimension 3;
+// zeros otherwise). Called by the bake after the normals are set.
+void computeOuterCellCubics(ProbeSet& set);
+
+// Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most 64 per axis, each
+// seed being the cell that contains the grid cell's centre. Requires a complete topology.
+void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
+
+// Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
+// symmetric, values finite. Messages read "<name>: <field>[i]: problem". Safe for untrusted
+// data.
+Status validateProbeSet(const ProbeSet& set, std::string_view name);
+
+// .kprobe file, version 1, little-endian:
+//   header (72 bytes): "KPRB", u32 version, u32 dimension, u32 probeCount, u32 cellCount,
+//     u32 innerCellCount, u32 gridSize[3], f32 gridMin[3], f32 gridMax[3], u32 reserved = 0,
+//     u64 checksum = FNV-1a 64 of header bytes [0, 64) followed by the whole payload;
+//   payload: f32 positions[probeCount][3], f32 sh[probeCount][9][3] (coefficient-major,
+//     RGB innermost), f32 validity[probeCount], i32 cells[cellCount][4],
+//     i32 neighbours[cellCount][4], f32 outerNormals[outerCount][3][3],
+//     f32 outerCubic[outerCount][4][4], i32 seeds[gridSize product];
+//   where outerCount = cellCount - innerCellCount.
+inline constexpr uint32_t kProbeFileVersion = 1;
+inline constexpr size_t kProbeFileHeaderSize = 72;
+
+// Serialization (no validation: write what is given, so tests can craft bad files).
+std::vector<uint8_t> serializeProbeSet(const ProbeSet& set);
+// Parses and validates a whole file image; `name` prefixes messages. Never allocates more than
+// the input size justifies. Safe for untrusted input.
+Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view name);
+
+// Writes `path` atomically (to path + ".tmp", then rename).
+Status writeProbeFile(const ProbeSet& set, const std::string& path);
+// Reads and validates `path`; messages name the file and the field.
+Result<ProbeSet> loadProbeFile(const std::string& path);
+
+// FNV-1a 64-bit hash, continuing from `hash` (start with kFnvOffset).
+inline constexpr uint64_t kFnvOffset = 14695981039346656037ull;
+uint64_t fnv1a64(std::span<const uint8_t> bytes, uint64_t hash = kFnvOffset);
+
+}  // namespace kiln

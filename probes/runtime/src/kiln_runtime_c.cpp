@@ -1,0 +1,176 @@
+// kiln_runtime_c.cpp: the C API (kiln_runtime.h) over probe_set.h / probe_runtime.h. Every
+// entry point catches C++ exceptions and turns them into status codes (as Embree does).
+#include "kiln_runtime.h"
+
+#include <atomic>
+#include <cstring>
+#include <new>
+#include <string>
+
+#include "kiln/probe_runtime.h"
+#include "kiln/probe_set.h"
+
+struct kiln_probes {
+  std::atomic<int> references{1};
+  kiln::ProbeSet set;
+};
+
+namespace {
+
+thread_local std::string tlsError;
+
+kiln_status setError(kiln_status status, std::string message) {
+  try {
+    tlsError = std::move(message);
+  } catch (...) {
+    tlsError.clear();
+  }
+  return status;
+}
+
+kiln_status ok() {
+  tlsError.clear();
+  return KILN_OK;
+}
+
+template <typename F>
+kiln_status guarded(F&& f) {
+  try {
+    return f();
+  } catch (const std::bad_alloc&) {
+    return setError(KILN_ERROR_OUT_OF_MEMORY, "out of memory");
+  } catch (const std::exception& e) {
+    return setError(KILN_ERROR_UNKNOWN, e.what());
+  } catch (...) {
+    return setError(KILN_ERROR_UNKNOWN, "unknown error");
+  }
+}
+
+void toC(const kiln::ProbeLocation& loc, kiln_probe_location* out) {
+  out->cell = loc.cell;
+  for (int k = 0; k < 4; ++k) {
+    out->probes[k] = loc.probes[k];
+    out->weights[k] = loc.weights[k];
+  }
+}
+
+void shToFloats(const kiln::ShL2Rgb& sh, float* out) {
+  for (int i = 0; i < kiln::kShL2Count; ++i) {
+    for (int ch = 0; ch < 3; ++ch) out[3 * i + ch] = sh.c[i][ch];
+  }
+}
+
+// A location from C is untrusted: check its indices before blending.
+bool fromC(const kiln::ProbeSet& set, const kiln_probe_location* in, kiln::ProbeLocation& loc) {
+  loc.cell = in->cell;
+  for (int k = 0; k < 4; ++k) {
+    if (in->probes[k] < 0 || in->probes[k] >= set.probeCount()) return false;
+    loc.probes[k] = in->probes[k];
+    loc.weights[k] = in->weights[k];
+  }
+  return true;
+}
+
+}  // namespace
+
+extern "C" {
+
+kiln_status kiln_probes_load(const char* path, kiln_probes** out) {
+  return guarded([&] {
+    if (!path || !out) return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_load: NULL");
+    *out = nullptr;
+    std::FILE* f = std::fopen(path, "rb");
+    if (!f) return setError(KILN_ERROR_IO, std::string(path) + ": cannot open");
+    std::fclose(f);
+    kiln::Result<kiln::ProbeSet> set = kiln::loadProbeFile(path);
+    if (!set) return setError(KILN_ERROR_INVALID_FILE, set.error());
+    auto* handle = new kiln_probes;
+    handle->set = std::move(set).value();
+    *out = handle;
+    return ok();
+  });
+}
+
+void kiln_probes_retain(kiln_probes* probes) {
+  if (probes) probes->references.fetch_add(1, std::memory_order_relaxed);
+}
+
+void kiln_probes_release(kiln_probes* probes) {
+  if (probes && probes->references.fetch_sub(1, std::memory_order_acq_rel) == 1) delete probes;
+}
+
+uint32_t kiln_probes_count(const kiln_probes* probes) {
+  return probes ? uint32_t(probes->set.probeCount()) : 0u;
+}
+
+uint32_t kiln_probes_cell_count(const kiln_probes* probes) {
+  return probes ? uint32_t(probes->set.cellCount()) : 0u;
+}
+
+kiln_status kiln_probes_locate(const kiln_probes* probes, const float position[3], int32_t hint,
+                               kiln_probe_location* out) {
+  return guarded([&] {
+    if (!probes || !position || !out) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_locate: NULL argument");
+    }
+    toC(kiln::locateProbe(probes->set, glm::vec3(position[0], position[1], position[2]), hint),
+        out);
+    return ok();
+  });
+}
+
+kiln_status kiln_probes_sample_sh(const kiln_probes* probes, const kiln_probe_location* location,
+                                  float out_sh[27]) {
+  return guarded([&] {
+    if (!probes || !location || !out_sh) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_sample_sh: NULL argument");
+    }
+    kiln::ProbeLocation loc;
+    if (!fromC(probes->set, location, loc)) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT,
+                      "kiln_probes_sample_sh: location.probes: index out of range");
+    }
+    shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh);
+    return ok();
+  });
+}
+
+kiln_status kiln_probes_irradiance(const float sh[27], const float normal[3], float out_rgb[3]) {
+  return guarded([&] {
+    if (!sh || !normal || !out_rgb) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_irradiance: NULL argument");
+    }
+    kiln::ShL2Rgb s;
+    for (int i = 0; i < kiln::kShL2Count; ++i) {
+      s.c[i] = glm::vec3(sh[3 * i], sh[3 * i + 1], sh[3 * i + 2]);
+    }
+    const glm::vec3 e = s.irradiance(glm::vec3(normal[0], normal[1], normal[2]));
+    out_rgb[0] = e.x;
+    out_rgb[1] = e.y;
+    out_rgb[2] = e.z;
+    return ok();
+  });
+}
+
+kiln_status kiln_probes_sample_batch(const kiln_probes* probes, size_t count,
+                                     const float* positions, int32_t* hints,
+                                     kiln_probe_location* out_locations, float* out_sh) {
+  return guarded([&] {
+    if (!probes || (count > 0 && !positions)) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_sample_batch: NULL argument");
+    }
+    for (size_t i = 0; i < count; ++i) {
+      const float* p = positions + 3 * i;
+      const kiln::ProbeLocation loc =
+          kiln::locateProbe(probes->set, glm::vec3(p[0], p[1], p[2]), hints ? hints[i] : -1);
+      if (hints) hints[i] = loc.cell;
+      if (out_locations) toC(loc, out_locations + i);
+      if (out_sh) shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh + 27 * i);
+    }
+    return ok();
+  });
+}
+
+const char* kiln_last_error(void) { return tlsError.c_str(); }
+
+}  // extern "C"

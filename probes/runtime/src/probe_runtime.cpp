@@ -1,0 +1,513 @@
+// probe_runtime.cpp: point location in the probe tetrahedralization and SH blending.
+//
+// Inside the hull: a visibility walk (Cupisz, GDC 2012; Devillers, Pion and Teillaud, "Walking
+// in a triangulation", 2002) that leaves each tetrahedron across the face with the most
+// negative barycentric coordinate. Signs come from the filtered exact orient3d
+// (predicates.h), so on a Delaunay tetrahedralization the walk terminates; a step cap and a
+// scan of all cells make it terminate on any input. Outside the hull: Cupisz's outer cells,
+// solving a cubic for the offset t at which the hull triangle swept along its vertex normals
+// passes through the point.
+#include "kiln/probe_runtime.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "kiln/predicates.h"
+
+namespace kiln {
+namespace {
+
+using glm::dvec3;
+
+// Outer-cell barycentrics this far below zero still count as inside (then clamped); keeps
+// neighbouring outer cells from both rejecting a point on their shared swept edge.
+constexpr double kOuterTolerance = 1e-7;
+
+dvec3 d3(glm::vec3 v) { return dvec3(v); }
+
+// Writes n weights (clamped to >= 0, normalised) and pads unused slots.
+void finish(ProbeLocation& loc, int32_t cell, const int32_t* probes, const double* w, int n) {
+  loc.cell = cell;
+  double sum = 0.0;
+  double c[4] = {0, 0, 0, 0};
+  for (int k = 0; k < n; ++k) {
+    c[k] = std::isfinite(w[k]) ? std::max(w[k], 0.0) : 0.0;
+    sum += c[k];
+  }
+  if (!(sum > 0.0) || !std::isfinite(sum)) {
+    // Degenerate cell (should not happen on validated data): fall back to its first probe.
+    for (int k = 0; k < n; ++k) c[k] = 0.0;
+    c[0] = 1.0;
+    sum = 1.0;
+  }
+  for (int k = 0; k < 4; ++k) {
+    loc.probes[k] = k < n ? probes[k] : probes[0];
+    loc.weights[k] = k < n ? float(c[k] / sum) : 0.0f;
+  }
+}
+
+// ---- dimension 3 -------------------------------------------------------------------------
+
+// Signed sub-volumes of p against tetrahedron `cell` (b[k]: vertex k replaced by p). Returns
+// the face to leave by (most negative, exact sign) or -1 when p is inside or on the boundary.
+int evalTet(const ProbeSet& s, int32_t cell, glm::vec3 p, double b[4]) {
+  const glm::ivec4 t = s.cells[cell];
+  const glm::vec3 v0 = s.positions[t[0]], v1 = s.positions[t[1]], v2 = s.positions[t[2]],
+                  v3 = s.positions[t[3]];
+  b[0] = orient3d(p, v1, v2, v3);
+  b[1] = orient3d(v0, p, v2, v3);
+  b[2] = orient3d(v0, v1, p, v3);
+  b[3] = orient3d(v0, v1, v2, p);
+  int exit = -1;
+  double most = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    if (b[k] < most) {
+      most = b[k];
+      exit = k;
+    }
+  }
+  return exit;
+}
+
+double horner(const double c[4], double t) { return ((c[0] * t + c[1]) * t + c[2]) * t + c[3]; }
+double hornerDerivative(const double c[4], double t) {
+  return (3.0 * c[0] * t + 2.0 * c[1]) * t + c[2];
+}
+int sgn(double x) { return (x > 0.0) - (x < 0.0); }
+
+// Root of the polynomial in [lo, hi] where it changes sign: bisection safeguarded Newton.
+double refineRoot(const double c[4], double lo, double hi) {
+  const int slo = sgn(horner(c, lo));
+  double t = 0.5 * (lo + hi);
+  for (int i = 0; i < 200; ++i) {
+    const double ft = horner(c, t);
+    if (ft == 0.0) return t;
+    if (sgn(ft) == slo) {
+      lo = t;
+    } else {
+      hi = t;
+    }
+    const double df = hornerDerivative(c, t);
+    double next = df != 0.0 ? t - ft / df : 0.5 * (lo + hi);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (std::fabs(next - t) <= 1e-15 * std::max(1.0, std::fabs(t)) || hi - lo <= 0.0) {
+      return next;
+    }
+    t = next;
+  }
+  return t;
+}
+
+// Non-negative real roots of c[0] t^3 + c[1] t^2 + c[2] t + c[3], increasing, found by
+// splitting [0, inf) at the critical points into monotone pieces; works unchanged when the
+// leading coefficients vanish (flat hull regions give a linear equation). `scale` is a
+// typical length, the first step when searching for a bracket towards infinity.
+int nonNegativeRoots(const double c[4], double scale, double roots[3]) {
+  double crit[2];
+  int nc = 0;
+  const double qa = 3.0 * c[0], qb = 2.0 * c[1], qc = c[2];
+  if (qa == 0.0) {
+    if (qb != 0.0) crit[nc++] = -qc / qb;
+  } else {
+    const double disc = qb * qb - 4.0 * qa * qc;
+    if (disc >= 0.0) {
+      const double q = -0.5 * (qb + std::copysign(std::sqrt(disc), qb));
+      crit[nc++] = q / qa;
+      if (q != 0.0) crit[nc++] = qc / q;
+    }
+  }
+  if (nc == 2 && crit[0] > crit[1]) std::swap(crit[0], crit[1]);
+  double breaks[4];
+  int nb = 0;
+  breaks[nb++] = 0.0;
+  for (int i = 0; i < nc; ++i) {
+    if (std::isfinite(crit[i]) && crit[i] > breaks[nb - 1]) breaks[nb++] = crit[i];
+  }
+  const double inf = std::numeric_limits<double>::infinity();
+  breaks[nb++] = inf;
+  int signInf = sgn(c[0]);
+  for (int i = 1; i < 4 && signInf == 0; ++i) signInf = sgn(c[i]);
+
+  int n = 0;
+  for (int i = 0; i + 1 < nb && n < 3; ++i) {
+    const double lo = breaks[i];
+    double hi = breaks[i + 1];
+    const double flo = horner(c, lo);
+    if (flo == 0.0) {
+      if (n == 0 || roots[n - 1] != lo) roots[n++] = lo;
+      continue;
+    }
+    int shi = hi == inf ? signInf : sgn(horner(c, hi));
+    if (shi == 0 || shi == sgn(flo)) continue;
+    if (hi == inf) {
+      double step = scale > 0.0 ? scale : 1.0;
+      hi = lo + step;
+      int iter = 0;
+      while (sgn(horner(c, hi)) == sgn(flo) && iter++ < 2100 && std::isfinite(hi)) {
+        step *= 2.0;
+        hi = lo + step;
+      }
+      if (!std::isfinite(hi) || sgn(horner(c, hi)) == sgn(flo)) continue;
+    }
+    roots[n++] = refineRoot(c, lo, hi);
+  }
+  return n;
+}
+
+// Barycentrics of p with respect to triangle abc (p assumed in its plane, else projected).
+void triangleBarycentrics(dvec3 a, dvec3 b, dvec3 c, dvec3 p, double w[3]) {
+  const dvec3 n = glm::cross(b - a, c - a);
+  const double den = glm::dot(n, n);
+  if (!(den > 0.0)) {
+    w[0] = 1.0;
+    w[1] = w[2] = 0.0;
+    return;
+  }
+  w[0] = glm::dot(glm::cross(b - p, c - p), n) / den;
+  w[1] = glm::dot(glm::cross(c - p, a - p), n) / den;
+  w[2] = glm::dot(glm::cross(a - p, b - p), n) / den;
+}
+
+struct OuterEval {
+  int exit = -1;  // -1: inside; 3: back into the hull; 0..2: across a swept edge
+  double w[3] = {0, 0, 0};
+};
+
+OuterEval evalOuter(const ProbeSet& s, int32_t cell, glm::vec3 p) {
+  OuterEval e;
+  const glm::ivec4 t = s.cells[cell];
+  const glm::vec3 A = s.positions[t[0]], B = s.positions[t[1]], C = s.positions[t[2]];
+  const double side = orient3d(A, B, C, p);
+  if (side < 0.0) {
+    e.exit = 3;
+    e.w[0] = side;  // only used as a (poor) score by the scan
+    return e;
+  }
+  const OuterCell& oc = s.outerCells[size_t(cell - s.innerCellCount)];
+  const dvec3 q = d3(p) - d3(A);
+  double coef[4];
+  for (int i = 0; i < 4; ++i) {
+    coef[i] = glm::dot(dvec3(oc.cubic[i]), q) + double(oc.cubic[i].w);
+  }
+  double roots[3];
+  int nr;
+  if (side == 0.0 || coef[3] <= 0.0) {
+    roots[0] = 0.0;  // on the hull plane (or round-off says so): the triangle itself
+    nr = 1;
+  } else {
+    const double scale = std::sqrt(std::sqrt(glm::dot(dvec3(oc.cubic[3]), dvec3(oc.cubic[3]))));
+    nr = nonNegativeRoots(coef, scale, roots);
+    if (nr == 0) {
+      roots[0] = 0.0;  // degenerate normals: project onto the hull triangle
+      nr = 1;
+    }
+  }
+  const dvec3 nA(oc.normals[0]), nB(oc.normals[1]), nC(oc.normals[2]);
+  double first[3] = {0, 0, 0};
+  for (int r = 0; r < nr; ++r) {
+    const double tr = roots[r];
+    double w[3];
+    triangleBarycentrics(d3(A) + tr * nA, d3(B) + tr * nB, d3(C) + tr * nC, d3(p), w);
+    if (r == 0) std::copy(w, w + 3, first);
+    if (w[0] >= -kOuterTolerance && w[1] >= -kOuterTolerance && w[2] >= -kOuterTolerance) {
+      std::copy(w, w + 3, e.w);
+      e.exit = -1;
+      return e;
+    }
+  }
+  std::copy(first, first + 3, e.w);
+  e.exit = int(std::min_element(first, first + 3) - first);
+  return e;
+}
+
+int32_t seedCell(const ProbeSet& s, glm::vec3 p) {
+  const ProbeSeedGrid& g = s.grid;
+  if (g.size.x <= 0 || g.seeds.empty()) return 0;
+  glm::ivec3 idx;
+  for (int a = 0; a < 3; ++a) {
+    const float ext = g.max[a] - g.min[a];
+    float f = ext > 0.0f ? (p[a] - g.min[a]) / ext * float(g.size[a]) : 0.0f;
+    if (!(f >= 0.0f)) f = 0.0f;  // also catches NaN
+    idx[a] = std::min(int(std::min(f, 1e9f)), g.size[a] - 1);
+  }
+  return g.seeds[size_t(idx.x) + size_t(g.size.x) * (size_t(idx.y) + size_t(g.size.y) * idx.z)];
+}
+
+void setTet(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const double b[4]) {
+  const glm::ivec4 t = s.cells[cell];
+  const int32_t probes[4] = {t[0], t[1], t[2], t[3]};
+  finish(loc, cell, probes, b, 4);
+}
+
+void setOuter(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const double w[3]) {
+  const glm::ivec4 t = s.cells[cell];
+  const int32_t probes[3] = {t[0], t[1], t[2]};
+  finish(loc, cell, probes, w, 3);
+}
+
+void scan3(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc) {
+  loc.bruteForce = true;
+  double bestScore = -std::numeric_limits<double>::infinity();
+  int32_t bestCell = -1;
+  double bestW[4] = {1, 0, 0, 0};
+  for (int32_t c = 0; c < s.innerCellCount; ++c) {
+    double b[4];
+    if (evalTet(s, c, p, b) < 0) {
+      setTet(s, loc, c, b);
+      return;
+    }
+    const double total = b[0] + b[1] + b[2] + b[3];
+    if (!(total > 0.0)) continue;
+    const double score = std::min(std::min(b[0], b[1]), std::min(b[2], b[3])) / total;
+    if (score > bestScore) {
+      bestScore = score;
+      bestCell = c;
+      std::copy(b, b + 4, bestW);
+    }
+  }
+  for (int32_t c = s.innerCellCount; c < s.cellCount(); ++c) {
+    const OuterEval e = evalOuter(s, c, p);
+    if (e.exit < 0) {
+      setOuter(s, loc, c, e.w);
+      return;
+    }
+    if (e.exit == 3) continue;
+    const double score = std::min(std::min(e.w[0], e.w[1]), e.w[2]);
+    if (score > bestScore) {
+      bestScore = score;
+      bestCell = c;
+      std::copy(e.w, e.w + 3, bestW);
+    }
+  }
+  if (bestCell < 0) bestCell = 0;
+  if (bestCell < s.innerCellCount) {
+    setTet(s, loc, bestCell, bestW);
+  } else {
+    setOuter(s, loc, bestCell, bestW);
+  }
+}
+
+void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc) {
+  for (int step = 0; step < kMaxWalkSteps; ++step) {
+    loc.steps = uint16_t(std::min(step + 1, 65535));
+    int32_t next;
+    if (cell < s.innerCellCount) {
+      double b[4];
+      const int exit = evalTet(s, cell, p, b);
+      if (exit < 0) {
+        setTet(s, loc, cell, b);
+        return;
+      }
+      next = s.neighbours[cell][exit];
+    } else {
+      const OuterEval e = evalOuter(s, cell, p);
+      if (e.exit < 0) {
+        setOuter(s, loc, cell, e.w);
+        return;
+      }
+      next = s.neighbours[cell][e.exit];
+    }
+    if (next < 0) break;
+    cell = next;
+  }
+  scan3(s, p, loc);
+}
+
+// ---- dimension 2 -------------------------------------------------------------------------
+
+// The plane's normal, stored by the bake in every hull edge (OuterCell::normals[0]); any one
+// triangle's normal would do in exact arithmetic, but a sliver's is noise.
+dvec3 planeNormal(const ProbeSet& s) {
+  if (!s.outerCells.empty()) {
+    const dvec3 n(s.outerCells[0].normals[0]);
+    if (glm::dot(n, n) > 0.5) return n;
+  }
+  const glm::ivec4 t = s.cells[0];
+  const dvec3 a = d3(s.positions[t[0]]);
+  return glm::cross(d3(s.positions[t[1]]) - a, d3(s.positions[t[2]]) - a);
+}
+
+// Signed areas (times |n|) of p against triangle `cell` projected along n.
+int evalTriangle(const ProbeSet& s, int32_t cell, dvec3 p, dvec3 n, double b[3]) {
+  const glm::ivec4 t = s.cells[cell];
+  const dvec3 v0 = d3(s.positions[t[0]]), v1 = d3(s.positions[t[1]]), v2 = d3(s.positions[t[2]]);
+  b[0] = glm::dot(glm::cross(v1 - p, v2 - p), n);
+  b[1] = glm::dot(glm::cross(v2 - p, v0 - p), n);
+  b[2] = glm::dot(glm::cross(v0 - p, v1 - p), n);
+  const double tol = -1e-12 * (std::fabs(b[0]) + std::fabs(b[1]) + std::fabs(b[2]));
+  int exit = -1;
+  double most = tol;
+  for (int k = 0; k < 3; ++k) {
+    if (b[k] < most) {
+      most = b[k];
+      exit = k;
+    }
+  }
+  return exit;
+}
+
+// Outside a planar hull: the nearest point of the hull boundary (continuous; documented
+// fallback for coplanar probe sets).
+void nearestHullEdge(const ProbeSet& s, dvec3 p, ProbeLocation& loc) {
+  double best = std::numeric_limits<double>::infinity();
+  int32_t bestCell = -1;
+  double bestS = 0.0;
+  for (int32_t c = s.innerCellCount; c < s.cellCount(); ++c) {
+    const glm::ivec4 t = s.cells[c];
+    const dvec3 a = d3(s.positions[t[0]]), b = d3(s.positions[t[1]]);
+    const dvec3 ab = b - a;
+    const double len2 = glm::dot(ab, ab);
+    const double u = len2 > 0.0 ? std::clamp(glm::dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+    const dvec3 d = a + u * ab - p;
+    const double dist2 = glm::dot(d, d);
+    if (dist2 < best) {
+      best = dist2;
+      bestCell = c;
+      bestS = u;
+    }
+  }
+  if (bestCell < 0) {
+    const int32_t probes[1] = {s.cells[0][0]};
+    const double w[1] = {1.0};
+    finish(loc, 0, probes, w, 1);
+    return;
+  }
+  const glm::ivec4 t = s.cells[bestCell];
+  const int32_t probes[2] = {t[0], t[1]};
+  const double w[2] = {1.0 - bestS, bestS};
+  finish(loc, bestCell, probes, w, 2);
+}
+
+void setTriangle(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const double b[3]) {
+  const glm::ivec4 t = s.cells[cell];
+  const int32_t probes[3] = {t[0], t[1], t[2]};
+  finish(loc, cell, probes, b, 3);
+}
+
+void locate2(const ProbeSet& s, glm::vec3 pf, int32_t cell, ProbeLocation& loc) {
+  const dvec3 n = planeNormal(s);
+  const dvec3 p = d3(pf);
+  if (cell >= s.innerCellCount) cell = s.neighbours[cell][2] >= 0 ? s.neighbours[cell][2] : 0;
+  for (int step = 0; step < kMaxWalkSteps; ++step) {
+    loc.steps = uint16_t(std::min(step + 1, 65535));
+    double b[3];
+    const int exit = evalTriangle(s, cell, p, n, b);
+    if (exit < 0) {
+      setTriangle(s, loc, cell, b);
+      return;
+    }
+    const int32_t next = s.neighbours[cell][exit];
+    if (next < 0 || next >= s.innerCellCount) {
+      nearestHullEdge(s, p, loc);  // crossed a hull edge: p is outside the convex hull
+      return;
+    }
+    cell = next;
+  }
+  loc.bruteForce = true;
+  for (int32_t c = 0; c < s.innerCellCount; ++c) {
+    double b[3];
+    if (evalTriangle(s, c, p, n, b) < 0) {
+      setTriangle(s, loc, c, b);
+      return;
+    }
+  }
+  nearestHullEdge(s, p, loc);
+}
+
+// ---- dimensions 1 and 0 ------------------------------------------------------------------
+
+void locate1(const ProbeSet& s, glm::vec3 pf, ProbeLocation& loc) {
+  const int32_t n = s.innerCellCount;
+  const dvec3 origin = d3(s.positions[s.cells[0][0]]);
+  const dvec3 dir = d3(s.positions[s.cells[n - 1][1]]) - origin;
+  const double len2 = glm::dot(dir, dir);
+  auto param = [&](dvec3 x) { return len2 > 0.0 ? glm::dot(x - origin, dir) / len2 : 0.0; };
+  const double sp = param(d3(pf));
+  // Last segment whose start is at or before sp (segments are ordered along the line).
+  int32_t lo = 0, hi = n - 1;
+  while (lo < hi) {
+    const int32_t mid = (lo + hi + 1) / 2;
+    if (param(d3(s.positions[s.cells[mid][0]])) <= sp) {
+      lo = mid;
+    } else {
+      hi = mid - 1;
+    }
+  }
+  const glm::ivec4 t = s.cells[lo];
+  const double s0 = param(d3(s.positions[t[0]])), s1 = param(d3(s.positions[t[1]]));
+  const double u = s1 > s0 ? std::clamp((sp - s0) / (s1 - s0), 0.0, 1.0) : 0.0;
+  const int32_t probes[2] = {t[0], t[1]};
+  const double w[2] = {1.0 - u, u};
+  finish(loc, lo, probes, w, 2);
+  loc.steps = 1;
+}
+
+}  // namespace
+
+ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
+  ProbeLocation loc;
+  if (s.cells.empty() || s.innerCellCount <= 0) return loc;
+  switch (s.dimension) {
+    case 3:
+    case 2: {
+      if (hint < 0 || hint >= s.cellCount()) hint = seedCell(s, p);
+      if (hint < 0 || hint >= s.cellCount()) hint = 0;
+      if (s.dimension == 3) {
+        locate3(s, p, hint, loc);
+      } else {
+        locate2(s, p, hint, loc);
+      }
+      break;
+    }
+    case 1:
+      locate1(s, p, loc);
+      break;
+    default: {
+      const int32_t probes[1] = {s.cells[0][0]};
+      const double w[1] = {1.0};
+      finish(loc, 0, probes, w, 1);
+      loc.steps = 1;
+    }
+  }
+  return loc;
+}
+
+ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept {
+  ShL2Rgb r;
+  if (loc.cell < 0) return r;
+  for (int k = 0; k < 4; ++k) {
+    const float w = loc.weights[k];
+    if (w == 0.0f) continue;
+    const ShL2Rgb& src = s.sh[size_t(loc.probes[k])];
+    for (int i = 0; i < kShL2Count; ++i) r.c[i] += w * src.c[i];
+  }
+  return r;
+}
+
+ShL2Rgb sampleProbes(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
+  return interpolateProbes(s, locateProbe(s, p, hint));
+}
+
+void locateProbes(const ProbeSet& s, std::span<const glm::vec3> points,
+                  std::span<int32_t> hints, std::span<ProbeLocation> out) noexcept {
+  const bool useHints = hints.size() == points.size();
+  const size_t n = std::min(points.size(), out.size());
+  for (size_t i = 0; i < n; ++i) {
+    out[i] = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    if (useHints) hints[i] = out[i].cell;
+  }
+}
+
+void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
+                  std::span<ShL2Rgb> out) noexcept {
+  const bool useHints = hints.size() == points.size();
+  const size_t n = std::min(points.size(), out.size());
+  for (size_t i = 0; i < n; ++i) {
+    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    if (useHints) hints[i] = loc.cell;
+    out[i] = interpolateProbes(s, loc);
+  }
+}
+
+}  // namespace kiln

@@ -1,0 +1,421 @@
+// probe_set.cpp: derived runtime data (outer-cell cubics, seed grid), validation, and the
+// .kprobe reader/writer (format in probe_set.h). The reader treats files as untrusted: header
+// counts are checked against the file length before anything is allocated, and every index
+// and value is checked before the lookup may rely on it.
+#include "kiln/probe_set.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <system_error>
+
+#include "kiln/probe_runtime.h"
+
+namespace kiln {
+
+static_assert(std::endian::native == std::endian::little,
+              "the .kprobe reader/writer assumes a little-endian host");
+static_assert(sizeof(ShL2Rgb) == 27 * sizeof(float), "ShL2Rgb must be 27 packed floats");
+static_assert(sizeof(glm::vec3) == 12 && sizeof(glm::ivec4) == 16 && sizeof(glm::vec4) == 16);
+
+namespace {
+
+// Limits that keep every size computation far from overflow.
+constexpr uint32_t kMaxProbes = 1u << 26;
+constexpr uint32_t kMaxCells = 1u << 28;
+constexpr uint32_t kMaxGridAxis = 1024;
+constexpr uint64_t kMaxGridCells = 1u << 24;
+
+constexpr uint64_t kBytesPerProbe = 12 + 108 + 4;
+constexpr uint64_t kBytesPerCell = 16 + 16;
+constexpr uint64_t kBytesPerOuterCell = 36 + 64;
+
+Error fail(std::string_view name, const std::string& what) {
+  return Error{std::string(name) + ": " + what};
+}
+
+bool finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// Number of vertex slots a cell uses, by dimension and kind.
+int usedSlots(int dimension, bool outer) {
+  switch (dimension) {
+    case 3: return outer ? 3 : 4;
+    case 2: return outer ? 2 : 3;
+    case 1: return 2;
+    default: return 1;
+  }
+}
+
+struct Header {
+  uint32_t version, dimension, probeCount, cellCount, innerCellCount;
+  uint32_t gridSize[3];
+  float gridMin[3], gridMax[3];
+  uint32_t reserved;
+  uint64_t checksum;
+};
+
+template <typename T>
+T readAt(const uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return v;
+}
+
+Header decodeHeader(const uint8_t* h) {
+  Header r{};
+  r.version = readAt<uint32_t>(h + 4);
+  r.dimension = readAt<uint32_t>(h + 8);
+  r.probeCount = readAt<uint32_t>(h + 12);
+  r.cellCount = readAt<uint32_t>(h + 16);
+  r.innerCellCount = readAt<uint32_t>(h + 20);
+  for (int i = 0; i < 3; ++i) {
+    r.gridSize[i] = readAt<uint32_t>(h + 24 + 4 * i);
+    r.gridMin[i] = readAt<float>(h + 36 + 4 * i);
+    r.gridMax[i] = readAt<float>(h + 48 + 4 * i);
+  }
+  r.reserved = readAt<uint32_t>(h + 60);
+  r.checksum = readAt<uint64_t>(h + 64);
+  return r;
+}
+
+// Checks the header alone and returns the total file size its counts imply.
+Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_view name) {
+  if (available < kProbeFileHeaderSize) {
+    return fail(name, "header: truncated (" + std::to_string(available) + " bytes, need " +
+                          std::to_string(kProbeFileHeaderSize) + ")");
+  }
+  if (std::memcmp(h, "KPRB", 4) != 0) return fail(name, "magic: not a .kprobe file");
+  const Header hd = decodeHeader(h);
+  if (hd.version != kProbeFileVersion) {
+    return fail(name, "version: file version " + std::to_string(hd.version) +
+                          ", this reader supports " + std::to_string(kProbeFileVersion));
+  }
+  if (hd.dimension > 3) return fail(name, "dimension: " + std::to_string(hd.dimension));
+  if (hd.probeCount == 0 || hd.probeCount > kMaxProbes) {
+    return fail(name, "probeCount: " + std::to_string(hd.probeCount) + " out of range");
+  }
+  if (hd.cellCount == 0 || hd.cellCount > kMaxCells) {
+    return fail(name, "cellCount: " + std::to_string(hd.cellCount) + " out of range");
+  }
+  if (hd.innerCellCount == 0 || hd.innerCellCount > hd.cellCount) {
+    return fail(name, "innerCellCount: " + std::to_string(hd.innerCellCount) +
+                          " out of range (cellCount " + std::to_string(hd.cellCount) + ")");
+  }
+  uint64_t gridCells = 1;
+  for (int i = 0; i < 3; ++i) {
+    if (hd.gridSize[i] > kMaxGridAxis) {
+      return fail(name, "gridSize[" + std::to_string(i) + "]: " +
+                            std::to_string(hd.gridSize[i]) + " out of range");
+    }
+    gridCells *= hd.gridSize[i];
+  }
+  if (gridCells > kMaxGridCells) return fail(name, "gridSize: too many grid cells");
+  if (hd.reserved != 0) return fail(name, "reserved: must be 0");
+  const uint64_t outer = hd.cellCount - hd.innerCellCount;
+  const uint64_t expected = kProbeFileHeaderSize + hd.probeCount * kBytesPerProbe +
+                            hd.cellCount * kBytesPerCell + outer * kBytesPerOuterCell +
+                            gridCells * 4;
+  if (available != expected) {
+    return fail(name, "size: file has " + std::to_string(available) +
+                          " bytes but its header counts need " + std::to_string(expected) +
+                          (available < expected ? " (truncated)" : " (trailing data)"));
+  }
+  return expected;
+}
+
+template <typename T>
+void put(std::vector<uint8_t>& out, const T* data, size_t count) {
+  const size_t at = out.size();
+  out.resize(at + sizeof(T) * count);
+  if (count) std::memcpy(out.data() + at, data, sizeof(T) * count);
+}
+
+template <typename T>
+void take(const uint8_t*& p, std::vector<T>& v, size_t count) {
+  v.resize(count);
+  if (count) std::memcpy(v.data(), p, sizeof(T) * count);
+  p += sizeof(T) * count;
+}
+
+}  // namespace
+
+uint64_t fnv1a64(std::span<const uint8_t> bytes, uint64_t hash) {
+  for (uint8_t b : bytes) {
+    hash ^= b;
+    hash *= 1099511628211ull;
+  }
+  return hash;
+}
+
+void computeOuterCellCubics(ProbeSet& set) {
+  using glm::dvec3;
+  set.outerCells.resize(size_t(set.cellCount() - set.innerCellCount));
+  for (int32_t c = set.innerCellCount; c < set.cellCount(); ++c) {
+    OuterCell& oc = set.outerCells[size_t(c - set.innerCellCount)];
+    oc.cubic = {};
+    if (set.dimension != 3) continue;
+    const glm::ivec4 t = set.cells[c];
+    const dvec3 A(set.positions[t[0]]), B(set.positions[t[1]]), C(set.positions[t[2]]);
+    const dvec3 nA(oc.normals[0]), nB(oc.normals[1]), nC(oc.normals[2]);
+    // n(t) = (E1 + t F1) x (E2 + t F2) = N0 + t N1 + t^2 N2, and the condition
+    // dot(n(t), q - t nA) = 0 with q = p - A expands to the four rows below.
+    const dvec3 e1 = B - A, e2 = C - A, f1 = nB - nA, f2 = nC - nA;
+    const dvec3 n0 = glm::cross(e1, e2);
+    const dvec3 n1 = glm::cross(e1, f2) + glm::cross(f1, e2);
+    const dvec3 n2 = glm::cross(f1, f2);
+    oc.cubic[0] = glm::vec4(0.0f, 0.0f, 0.0f, float(-glm::dot(n2, nA)));
+    oc.cubic[1] = glm::vec4(glm::vec3(n2), float(-glm::dot(n1, nA)));
+    oc.cubic[2] = glm::vec4(glm::vec3(n1), float(-glm::dot(n0, nA)));
+    oc.cubic[3] = glm::vec4(glm::vec3(n0), 0.0f);
+  }
+}
+
+void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
+  set.grid = ProbeSeedGrid{};
+  if (set.dimension < 2 || set.innerCellCount <= 0) return;
+  glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-lo);
+  for (int32_t c = 0; c < set.innerCellCount; ++c) {
+    for (int k = 0; k < 4; ++k) {
+      if (set.cells[c][k] < 0) continue;
+      lo = glm::min(lo, set.positions[set.cells[c][k]]);
+      hi = glm::max(hi, set.positions[set.cells[c][k]]);
+    }
+  }
+  const glm::dvec3 ext = glm::dvec3(hi) - glm::dvec3(lo);
+  const double diag = glm::length(ext);
+  const glm::dvec3 e = glm::max(ext, glm::dvec3(1e-3 * diag + 1e-30));
+  const double target = std::max(1.0, double(set.innerCellCount) / std::max(1, targetCellsPerSeed));
+  const double k = std::cbrt(target / (e.x * e.y * e.z));
+  for (int a = 0; a < 3; ++a) {
+    set.grid.size[a] = std::clamp(int(std::lround(e[a] * k)), 1, 64);
+  }
+  set.grid.min = lo;
+  set.grid.max = hi;
+  const glm::ivec3 n = set.grid.size;
+  std::vector<int32_t> seeds(size_t(n.x) * n.y * n.z, 0);
+  int32_t hint = 0;
+  for (int z = 0; z < n.z; ++z) {
+    for (int y = 0; y < n.y; ++y) {
+      for (int x = 0; x < n.x; ++x) {
+        const glm::vec3 f = (glm::vec3(x, y, z) + 0.5f) / glm::vec3(n);
+        const glm::vec3 p = lo + f * (hi - lo);
+        const ProbeLocation loc = locateProbe(set, p, hint);
+        hint = loc.cell >= 0 ? loc.cell : 0;
+        seeds[size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * z)] = hint;
+      }
+    }
+  }
+  set.grid.seeds = std::move(seeds);
+}
+
+Status validateProbeSet(const ProbeSet& s, std::string_view name) {
+  if (s.dimension < 0 || s.dimension > 3) {
+    return fail(name, "dimension: " + std::to_string(s.dimension) + " is not 0..3");
+  }
+  const size_t np = s.positions.size(), nc = s.cells.size();
+  if (np == 0) return fail(name, "positions: no probes");
+  if (s.sh.size() != np) return fail(name, "sh: size differs from positions");
+  if (s.validity.size() != np) return fail(name, "validity: size differs from positions");
+  if (nc == 0) return fail(name, "cells: no cells");
+  if (s.neighbours.size() != nc) return fail(name, "neighbours: size differs from cells");
+  if (s.innerCellCount <= 0 || size_t(s.innerCellCount) > nc) {
+    return fail(name, "innerCellCount: out of range");
+  }
+  const size_t outer = nc - size_t(s.innerCellCount);
+  if (s.dimension < 2 && outer != 0) {
+    return fail(name, "innerCellCount: dimension " + std::to_string(s.dimension) +
+                          " has no outer cells");
+  }
+  if (s.outerCells.size() != outer) return fail(name, "outerCells: size differs from cells");
+  for (size_t i = 0; i < np; ++i) {
+    if (!finite(s.positions[i])) return fail(name, "positions[" + std::to_string(i) + "]: not finite");
+    if (!std::isfinite(s.validity[i])) {
+      return fail(name, "validity[" + std::to_string(i) + "]: not finite");
+    }
+    for (int k = 0; k < kShL2Count; ++k) {
+      if (!finite(s.sh[i].c[k])) {
+        return fail(name, "sh[" + std::to_string(i) + "][" + std::to_string(k) + "]: not finite");
+      }
+    }
+  }
+  for (size_t c = 0; c < nc; ++c) {
+    const bool isOuter = c >= size_t(s.innerCellCount);
+    const int used = usedSlots(s.dimension, isOuter);
+    for (int k = 0; k < 4; ++k) {
+      const int32_t v = s.cells[c][k];
+      const std::string field = "cells[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+      if (k < used && (v < 0 || size_t(v) >= np)) {
+        return fail(name, field + ": probe index " + std::to_string(v) +
+                              " out of range (probeCount " + std::to_string(np) + ")");
+      }
+      if (k >= used && v != -1) return fail(name, field + ": unused slot must be -1");
+      const int32_t n = s.neighbours[c][k];
+      const std::string nfield =
+          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+      if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
+        return fail(name, nfield + ": cell index " + std::to_string(n) + " out of range");
+      }
+    }
+  }
+  // Symmetry once every index is known to be in range.
+  for (size_t c = 0; c < nc; ++c) {
+    for (int k = 0; k < 4; ++k) {
+      const int32_t n = s.neighbours[c][k];
+      const std::string nfield =
+          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+      if (n >= 0) {
+        const glm::ivec4 back = s.neighbours[size_t(n)];
+        const int32_t ci = int32_t(c);
+        if (back[0] != ci && back[1] != ci && back[2] != ci && back[3] != ci) {
+          return fail(name, nfield + ": cell " + std::to_string(n) +
+                                " does not link back (asymmetric neighbours)");
+        }
+      }
+    }
+  }
+  for (size_t i = 0; i < outer; ++i) {
+    const OuterCell& oc = s.outerCells[i];
+    for (int k = 0; k < 3; ++k) {
+      if (!finite(oc.normals[k])) {
+        return fail(name, "outerCells[" + std::to_string(i) + "].normals: not finite");
+      }
+    }
+    for (int k = 0; k < 4; ++k) {
+      if (!finite(glm::vec3(oc.cubic[k])) || !std::isfinite(oc.cubic[k].w)) {
+        return fail(name, "outerCells[" + std::to_string(i) + "].cubic: not finite");
+      }
+    }
+  }
+  const ProbeSeedGrid& g = s.grid;
+  const glm::ivec3 gs = g.size;
+  if (gs.x < 0 || gs.y < 0 || gs.z < 0 || gs.x > int(kMaxGridAxis) || gs.y > int(kMaxGridAxis) ||
+      gs.z > int(kMaxGridAxis)) {
+    return fail(name, "gridSize: out of range");
+  }
+  const uint64_t gridCells = uint64_t(gs.x) * uint64_t(gs.y) * uint64_t(gs.z);
+  if (gridCells != g.seeds.size()) return fail(name, "seeds: size differs from gridSize");
+  if (!finite(g.min) || !finite(g.max)) return fail(name, "gridMin/gridMax: not finite");
+  for (size_t i = 0; i < g.seeds.size(); ++i) {
+    if (g.seeds[i] < 0 || size_t(g.seeds[i]) >= nc) {
+      return fail(name, "seeds[" + std::to_string(i) + "]: cell index out of range");
+    }
+  }
+  return Status::success();
+}
+
+std::vector<uint8_t> serializeProbeSet(const ProbeSet& s) {
+  std::vector<uint8_t> out(kProbeFileHeaderSize, 0);
+  std::memcpy(out.data(), "KPRB", 4);
+  const uint32_t words[] = {kProbeFileVersion,
+                            uint32_t(s.dimension),
+                            uint32_t(s.positions.size()),
+                            uint32_t(s.cells.size()),
+                            uint32_t(s.innerCellCount),
+                            uint32_t(s.grid.size.x),
+                            uint32_t(s.grid.size.y),
+                            uint32_t(s.grid.size.z)};
+  std::memcpy(out.data() + 4, words, sizeof(words));
+  std::memcpy(out.data() + 36, &s.grid.min, 12);
+  std::memcpy(out.data() + 48, &s.grid.max, 12);
+  put(out, s.positions.data(), s.positions.size());
+  put(out, s.sh.data(), s.sh.size());
+  put(out, s.validity.data(), s.validity.size());
+  put(out, s.cells.data(), s.cells.size());
+  put(out, s.neighbours.data(), s.neighbours.size());
+  for (const OuterCell& oc : s.outerCells) put(out, oc.normals.data(), 3);
+  for (const OuterCell& oc : s.outerCells) put(out, oc.cubic.data(), 4);
+  put(out, s.grid.seeds.data(), s.grid.seeds.size());
+  uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), 64));
+  sum = fnv1a64(std::span<const uint8_t>(out.data() + kProbeFileHeaderSize,
+                                         out.size() - kProbeFileHeaderSize),
+                sum);
+  std::memcpy(out.data() + 64, &sum, 8);
+  return out;
+}
+
+Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view name) {
+  Result<uint64_t> size = checkHeader(bytes.data(), bytes.size(), name);
+  if (!size) return Error{size.error()};
+  const Header hd = decodeHeader(bytes.data());
+  uint64_t sum = fnv1a64(bytes.subspan(0, 64));
+  sum = fnv1a64(bytes.subspan(kProbeFileHeaderSize), sum);
+  if (sum != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
+
+  ProbeSet s;
+  s.dimension = int32_t(hd.dimension);
+  s.innerCellCount = int32_t(hd.innerCellCount);
+  s.grid.size = glm::ivec3(hd.gridSize[0], hd.gridSize[1], hd.gridSize[2]);
+  s.grid.min = glm::vec3(hd.gridMin[0], hd.gridMin[1], hd.gridMin[2]);
+  s.grid.max = glm::vec3(hd.gridMax[0], hd.gridMax[1], hd.gridMax[2]);
+  const uint8_t* p = bytes.data() + kProbeFileHeaderSize;
+  take(p, s.positions, hd.probeCount);
+  take(p, s.sh, hd.probeCount);
+  take(p, s.validity, hd.probeCount);
+  take(p, s.cells, hd.cellCount);
+  take(p, s.neighbours, hd.cellCount);
+  const size_t outer = hd.cellCount - hd.innerCellCount;
+  s.outerCells.resize(outer);
+  for (OuterCell& oc : s.outerCells) {
+    std::memcpy(oc.normals.data(), p, 36);
+    p += 36;
+  }
+  for (OuterCell& oc : s.outerCells) {
+    std::memcpy(oc.cubic.data(), p, 64);
+    p += 64;
+  }
+  take(p, s.grid.seeds, size_t(hd.gridSize[0]) * hd.gridSize[1] * hd.gridSize[2]);
+  Status st = validateProbeSet(s, name);
+  if (!st) return Error{st.error()};
+  return s;
+}
+
+Status writeProbeFile(const ProbeSet& set, const std::string& path) {
+  const std::vector<uint8_t> bytes = serializeProbeSet(set);
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) return Error{tmp + ": cannot open for writing"};
+  const size_t written = std::fwrite(bytes.data(), 1, bytes.size(), f);
+  const bool closed = std::fclose(f) == 0;
+  if (written != bytes.size() || !closed) {
+    std::remove(tmp.c_str());
+    return Error{tmp + ": write failed"};
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
+  }
+  return Status::success();
+}
+
+Result<ProbeSet> loadProbeFile(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return Error{path + ": cannot open"};
+  struct Closer {
+    std::FILE* f;
+    ~Closer() { std::fclose(f); }
+  } closer{f};
+  if (std::fseek(f, 0, SEEK_END) != 0) return Error{path + ": cannot seek"};
+  const long end = std::ftell(f);
+  if (end < 0) return Error{path + ": cannot tell size"};
+  std::rewind(f);
+  const uint64_t fileSize = uint64_t(end);
+  uint8_t header[kProbeFileHeaderSize] = {};
+  const size_t got = std::fread(header, 1, std::min<uint64_t>(fileSize, sizeof(header)), f);
+  // Validate the counts against the file length before allocating the payload.
+  Result<uint64_t> expected = checkHeader(header, got < sizeof(header) ? got : fileSize, path);
+  if (!expected) return Error{expected.error()};
+  std::vector<uint8_t> bytes(static_cast<size_t>(expected.value()));
+  std::memcpy(bytes.data(), header, sizeof(header));
+  const size_t rest = bytes.size() - sizeof(header);
+  if (std::fread(bytes.data() + sizeof(header), 1, rest, f) != rest) {
+    return Error{path + ": read failed"};
+  }
+  return parseProbeSet(bytes, path);
+}
+
+}  // namespace kiln

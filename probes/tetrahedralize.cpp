@@ -1,0 +1,500 @@
+// tetrahedralize.cpp: probe topology: duplicate merging, dimension detection, Delaunay via a
+// backend, canonical ordering, neighbours, and Cupisz's outer cells (GDC 2012) on the hull
+// with hull vertex normals (area-weighted averages of the adjacent hull face normals).
+#include "probes/tetrahedralize.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <limits>
+#include <unordered_map>
+
+#include "kiln/predicates.h"
+#include "kiln/probe_runtime.h"
+#include "probes/delaunay_backends.h"
+
+namespace kiln {
+namespace {
+
+using glm::dvec2;
+using glm::dvec3;
+
+struct Context {
+  std::span<const glm::vec3> positions;
+  std::vector<std::string>* warnings;
+  void warn(std::string w) const {
+    if (warnings) warnings->push_back(std::move(w));
+  }
+};
+
+std::string fmt(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.3g", v);
+  return buf;
+}
+
+// Merges near-duplicates: returns, per input probe, its representative (an earlier probe or
+// itself), using a hash grid of cell size `tol` over the bounds.
+struct MergeStats {
+  int exact = 0, near = 0;
+  int32_t exactExample = -1, nearExample = -1;
+};
+
+std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, MergeStats& st) {
+  const auto& P = ctx.positions;
+  std::vector<int32_t> rep(P.size());
+  if (!(tol > 0.0)) {  // zero extent: everything coincides
+    for (size_t i = 0; i < P.size(); ++i) rep[i] = 0;
+    st.exact = int(P.size()) - 1;
+    if (P.size() > 1) st.exactExample = 1;
+    return rep;
+  }
+  std::unordered_map<uint64_t, std::vector<int32_t>> buckets;
+  auto key = [](int64_t x, int64_t y, int64_t z) {
+    return (uint64_t(x + 1) << 42) | (uint64_t(y + 1) << 21) | uint64_t(z + 1);
+  };
+  for (size_t i = 0; i < P.size(); ++i) {
+    const dvec3 p(P[i]);
+    const dvec3 g = glm::floor((p - lo) / tol);
+    const int64_t gx = int64_t(g.x), gy = int64_t(g.y), gz = int64_t(g.z);
+    int32_t found = -1;
+    for (int dz = -1; dz <= 1 && found < 0; ++dz) {
+      for (int dy = -1; dy <= 1 && found < 0; ++dy) {
+        for (int dx = -1; dx <= 1 && found < 0; ++dx) {
+          auto it = buckets.find(key(gx + dx, gy + dy, gz + dz));
+          if (it == buckets.end()) continue;
+          for (int32_t j : it->second) {
+            if (glm::length(dvec3(P[j]) - p) <= tol) {
+              found = j;
+              break;
+            }
+          }
+        }
+      }
+    }
+    if (found >= 0) {
+      rep[i] = found;
+      if (P[found] == P[i]) {
+        if (st.exact++ == 0) st.exactExample = int32_t(i);
+      } else {
+        if (st.near++ == 0) st.nearExample = int32_t(i);
+      }
+    } else {
+      rep[i] = int32_t(i);
+      buckets[key(gx, gy, gz)].push_back(int32_t(i));
+    }
+  }
+  return rep;
+}
+
+// Sorted key of a face / edge, for matching cells across it.
+struct FaceRef {
+  std::array<int32_t, 3> key;
+  int32_t cell;
+  int32_t slot;
+  bool operator<(const FaceRef& o) const {
+    return key != o.key ? key < o.key : (cell != o.cell ? cell < o.cell : slot < o.slot);
+  }
+};
+
+// Links cells that share a key; returns the refs seen only once (boundary). Error on a key
+// shared by more than two cells.
+Result<std::vector<FaceRef>> linkFaces(std::vector<FaceRef> refs,
+                                       std::vector<glm::ivec4>& neighbours) {
+  std::sort(refs.begin(), refs.end());
+  std::vector<FaceRef> boundary;
+  for (size_t i = 0; i < refs.size();) {
+    size_t j = i;
+    while (j < refs.size() && refs[j].key == refs[i].key) ++j;
+    if (j - i == 1) {
+      boundary.push_back(refs[i]);
+    } else if (j - i == 2) {
+      neighbours[refs[i].cell][refs[i].slot] = refs[i + 1].cell;
+      neighbours[refs[i + 1].cell][refs[i + 1].slot] = refs[i].cell;
+    } else {
+      return Error{"tetrahedralization is not a manifold (a face is shared by " +
+                   std::to_string(j - i) + " cells)"};
+    }
+    i = j;
+  }
+  return boundary;
+}
+
+ProbeSet emptySet(const Context& ctx, int dimension) {
+  ProbeSet s;
+  s.dimension = dimension;
+  s.positions.assign(ctx.positions.begin(), ctx.positions.end());
+  s.sh.assign(s.positions.size(), ShL2Rgb{});
+  s.validity.assign(s.positions.size(), 1.0f);
+  return s;
+}
+
+// ---- dimension 3 -------------------------------------------------------------------------
+
+Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
+                        const ProbeTopologySettings& settings) {
+  const auto& P = ctx.positions;
+  std::vector<dvec3> pts(reps.size());
+  for (size_t i = 0; i < reps.size(); ++i) pts[i] = dvec3(P[reps[i]]);
+  Result<detail::Tets> raw = settings.backend == DelaunayBackend::TetGen
+                                 ? detail::tetgenDelaunay3(pts)
+                                 : detail::cgalDelaunay3(pts);
+  if (!raw) return Error{raw.error()};
+
+  ProbeSet s = emptySet(ctx, 3);
+  std::vector<glm::ivec4> tets;
+  tets.reserve(raw->size());
+  int flat = 0;
+  for (const auto& t : *raw) {
+    glm::ivec4 v(reps[t[0]], reps[t[1]], reps[t[2]], reps[t[3]]);
+    std::sort(&v[0], &v[0] + 4);
+    const double o = orient3d(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
+    if (o == 0.0) {
+      ++flat;
+      continue;
+    }
+    if (o < 0.0) std::swap(v[2], v[3]);  // an odd permutation makes it positive
+    tets.push_back(v);
+  }
+  if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
+  if (tets.empty()) return Error{"tetrahedralization produced no tetrahedra"};
+  std::sort(tets.begin(), tets.end(), [](const glm::ivec4& a, const glm::ivec4& b) {
+    return std::lexicographical_compare(&a[0], &a[0] + 4, &b[0], &b[0] + 4);
+  });
+  const int32_t inner = int32_t(tets.size());
+
+  std::vector<int32_t> used(P.size(), 0);
+  for (const auto& t : tets) {
+    for (int k = 0; k < 4; ++k) used[t[k]] = 1;
+  }
+  int unused = 0;
+  for (int32_t r : reps) unused += used[r] ? 0 : 1;
+  if (unused > 0) {
+    ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
+  }
+
+  // Faces opposite each vertex; faces seen once are on the hull.
+  std::vector<glm::ivec4> tetNeighbours(tets.size(), glm::ivec4(-1));
+  std::vector<FaceRef> refs;
+  refs.reserve(tets.size() * 4);
+  for (int32_t c = 0; c < inner; ++c) {
+    for (int k = 0; k < 4; ++k) {
+      std::array<int32_t, 3> f{};
+      for (int j = 0, n = 0; j < 4; ++j) {
+        if (j != k) f[n++] = tets[c][j];
+      }
+      std::sort(f.begin(), f.end());
+      refs.push_back({f, c, k});
+    }
+  }
+  Result<std::vector<FaceRef>> hull = linkFaces(std::move(refs), tetNeighbours);
+  if (!hull) return Error{hull.error()};
+
+  // Outer cells: hull triangles wound outwards, smallest index first, sorted.
+  struct Outer {
+    std::array<int32_t, 3> v;
+    int32_t tet, slot;
+  };
+  std::vector<Outer> outers;
+  for (const FaceRef& f : *hull) {
+    const glm::ivec4 t = tets[f.cell];
+    std::array<int32_t, 3> v = f.key;
+    if (orient3d(P[v[0]], P[v[1]], P[v[2]], P[t[f.slot]]) > 0.0) std::swap(v[1], v[2]);
+    std::rotate(v.begin(), std::min_element(v.begin(), v.end()), v.end());
+    outers.push_back({v, f.cell, f.slot});
+  }
+  std::sort(outers.begin(), outers.end(),
+            [](const Outer& a, const Outer& b) { return a.v < b.v; });
+
+  s.innerCellCount = inner;
+  s.cells = tets;
+  s.neighbours = tetNeighbours;
+  std::vector<FaceRef> edges;
+  for (size_t i = 0; i < outers.size(); ++i) {
+    const int32_t c = inner + int32_t(i);
+    const Outer& o = outers[i];
+    s.cells.push_back(glm::ivec4(o.v[0], o.v[1], o.v[2], -1));
+    s.neighbours.push_back(glm::ivec4(-1, -1, -1, o.tet));
+    s.neighbours[o.tet][o.slot] = c;
+    for (int k = 0; k < 3; ++k) {
+      int32_t a = o.v[(k + 1) % 3], b = o.v[(k + 2) % 3];
+      if (a > b) std::swap(a, b);
+      edges.push_back({{a, b, -1}, c, k});
+    }
+  }
+  Result<std::vector<FaceRef>> open = linkFaces(std::move(edges), s.neighbours);
+  if (!open) return Error{open.error()};
+  if (!open->empty()) return Error{"convex hull is not closed"};
+
+  // Hull vertex normals: the sum of cross products = the area-weighted average of the
+  // adjacent hull face normals. Cupisz's sweep needs each vertex normal to point out of every
+  // adjacent face; on thin sets (a slab's rim) big faces on both sides can tip the weighted
+  // sum inwards, so such vertices take the better of the unweighted average of unit face
+  // normals and the direction from the probes' centroid (strictly inside the hull, hence on
+  // the inner side of every hull plane: that direction always points out of every face).
+  dvec3 centroid(0.0);
+  for (int32_t r : reps) centroid += dvec3(P[r]);
+  centroid /= double(reps.size());
+  std::vector<dvec3> normals(P.size(), dvec3(0.0)), unitSums(P.size(), dvec3(0.0));
+  std::vector<dvec3> radial(P.size());
+  for (size_t v = 0; v < P.size(); ++v) radial[v] = dvec3(P[v]) - centroid;
+  std::vector<dvec3> faceNormals;
+  for (const Outer& o : outers) {
+    const dvec3 a(P[o.v[0]]), b(P[o.v[1]]), c(P[o.v[2]]);
+    const dvec3 n = glm::cross(b - a, c - a);
+    faceNormals.push_back(glm::normalize(n));
+    for (int k = 0; k < 3; ++k) {
+      normals[o.v[k]] += n;
+      unitSums[o.v[k]] += faceNormals.back();
+    }
+  }
+  auto minDot = [&](std::vector<double>& out, const std::vector<dvec3>& sums) {
+    out.assign(P.size(), 2.0);
+    for (size_t i = 0; i < outers.size(); ++i) {
+      for (int k = 0; k < 3; ++k) {
+        const int32_t v = outers[i].v[k];
+        const double len = glm::length(sums[v]);
+        const double d = len > 0.0 ? glm::dot(sums[v], faceNormals[i]) / len : -1.0;
+        out[v] = std::min(out[v], d);
+      }
+    }
+  };
+  std::vector<double> weightedDot, unitDot, radialDot;
+  minDot(weightedDot, normals);
+  minDot(unitDot, unitSums);
+  minDot(radialDot, radial);
+  int inward = 0;
+  for (size_t v = 0; v < P.size(); ++v) {
+    // 0.1: well inside the cone, so the sweep of each face moves outwards.
+    if (weightedDot[v] == 2.0 || weightedDot[v] > 0.1) continue;
+    double best = weightedDot[v];
+    if (unitDot[v] > best) {
+      best = unitDot[v];
+      normals[v] = unitSums[v];
+    }
+    if (radialDot[v] > best) {
+      best = radialDot[v];
+      normals[v] = radial[v];
+    }
+    if (best <= 0.0) ++inward;
+  }
+  if (inward > 0) {
+    ctx.warn(std::to_string(inward) + " hull vertices have no normal pointing out of all their "
+             "faces (very thin probe set); extrapolation near them may be uneven");
+  }
+  s.outerCells.resize(outers.size());
+  for (size_t i = 0; i < outers.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const dvec3 n = normals[outers[i].v[k]];
+      const double len = glm::length(n);
+      s.outerCells[i].normals[k] = len > 0.0 ? glm::vec3(n / len) : glm::vec3(0.0f);
+    }
+  }
+  computeOuterCellCubics(s);
+  return s;
+}
+
+// ---- dimension 2 -------------------------------------------------------------------------
+
+Result<ProbeSet> build2(const Context& ctx, const std::vector<int32_t>& reps, dvec3 origin,
+                        dvec3 u, dvec3 n) {
+  const auto& P = ctx.positions;
+  const dvec3 v = glm::cross(n, u);
+  std::vector<dvec2> pts(reps.size());
+  for (size_t i = 0; i < reps.size(); ++i) {
+    const dvec3 d = dvec3(P[reps[i]]) - origin;
+    pts[i] = dvec2(glm::dot(d, u), glm::dot(d, v));
+  }
+  Result<detail::Triangles> raw = detail::cgalDelaunay2(pts);
+  if (!raw) return Error{raw.error()};
+  std::vector<int32_t> local(P.size(), -1);
+  for (size_t i = 0; i < reps.size(); ++i) local[reps[i]] = int32_t(i);
+
+  ProbeSet s = emptySet(ctx, 2);
+  std::vector<glm::ivec4> tris;
+  for (const auto& t : *raw) {
+    glm::ivec4 c(reps[t[0]], reps[t[1]], reps[t[2]], -1);
+    std::sort(&c[0], &c[0] + 3);
+    const dvec2 a = pts[local[c[0]]], b = pts[local[c[1]]], d = pts[local[c[2]]];
+    const double o = (b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x);
+    if (o == 0.0) continue;
+    if (o < 0.0) std::swap(c[1], c[2]);  // counter-clockwise about n
+    tris.push_back(c);
+  }
+  if (tris.empty()) return Error{"2D triangulation produced no triangles"};
+  std::sort(tris.begin(), tris.end(), [](const glm::ivec4& a, const glm::ivec4& b) {
+    return std::lexicographical_compare(&a[0], &a[0] + 3, &b[0], &b[0] + 3);
+  });
+  const int32_t inner = int32_t(tris.size());
+  std::vector<glm::ivec4> nb(tris.size(), glm::ivec4(-1));
+  std::vector<FaceRef> refs;
+  for (int32_t c = 0; c < inner; ++c) {
+    for (int k = 0; k < 3; ++k) {
+      int32_t a = tris[c][(k + 1) % 3], b = tris[c][(k + 2) % 3];
+      if (a > b) std::swap(a, b);
+      refs.push_back({{a, b, -1}, c, k});
+    }
+  }
+  Result<std::vector<FaceRef>> hull = linkFaces(std::move(refs), nb);
+  if (!hull) return Error{hull.error()};
+  std::vector<FaceRef> edges = *hull;  // key = sorted hull edge
+  std::sort(edges.begin(), edges.end(),
+            [](const FaceRef& a, const FaceRef& b) { return a.key < b.key; });
+  s.innerCellCount = inner;
+  s.cells = tris;
+  s.neighbours = nb;
+  std::vector<FaceRef> ends;
+  for (size_t i = 0; i < edges.size(); ++i) {
+    const int32_t c = inner + int32_t(i);
+    s.cells.push_back(glm::ivec4(edges[i].key[0], edges[i].key[1], -1, -1));
+    s.neighbours.push_back(glm::ivec4(-1, -1, edges[i].cell, -1));
+    s.neighbours[edges[i].cell][edges[i].slot] = c;
+    // Slot k links across the end opposite vertex k (vertex 1 - k).
+    ends.push_back({{edges[i].key[1], -1, -1}, c, 0});
+    ends.push_back({{edges[i].key[0], -1, -1}, c, 1});
+  }
+  Result<std::vector<FaceRef>> open = linkFaces(std::move(ends), s.neighbours);
+  if (!open) return Error{open.error()};
+  s.outerCells.resize(edges.size());
+  for (size_t i = 0; i < edges.size(); ++i) {
+    // Plane normal (for the runtime's projection) and the edge's outward in-plane normal.
+    const glm::ivec4 tri = s.cells[edges[i].cell];
+    const dvec3 a(P[edges[i].key[0]]), b(P[edges[i].key[1]]), apex(P[tri[edges[i].slot]]);
+    dvec3 out = glm::normalize(glm::cross(b - a, n));
+    if (glm::dot(out, apex - a) > 0.0) out = -out;
+    s.outerCells[i].normals[0] = glm::vec3(n);
+    s.outerCells[i].normals[1] = glm::vec3(out);
+  }
+  return s;
+}
+
+// ---- dimensions 1 and 0 ------------------------------------------------------------------
+
+ProbeSet build1(const Context& ctx, std::vector<int32_t> reps, dvec3 origin, dvec3 dir) {
+  const auto& P = ctx.positions;
+  std::stable_sort(reps.begin(), reps.end(), [&](int32_t a, int32_t b) {
+    return glm::dot(dvec3(P[a]) - origin, dir) < glm::dot(dvec3(P[b]) - origin, dir);
+  });
+  ProbeSet s = emptySet(ctx, 1);
+  const int32_t n = int32_t(reps.size()) - 1;
+  for (int32_t i = 0; i < n; ++i) {
+    s.cells.push_back(glm::ivec4(reps[i], reps[i + 1], -1, -1));
+    s.neighbours.push_back(glm::ivec4(i + 1 < n ? i + 1 : -1, i - 1, -1, -1));
+  }
+  s.innerCellCount = n;
+  return s;
+}
+
+ProbeSet build0(const Context& ctx, int32_t probe) {
+  ProbeSet s = emptySet(ctx, 0);
+  s.cells.push_back(glm::ivec4(probe, -1, -1, -1));
+  s.neighbours.push_back(glm::ivec4(-1));
+  s.innerCellCount = 1;
+  return s;
+}
+
+}  // namespace
+
+Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
+                                    const ProbeTopologySettings& settings,
+                                    std::vector<std::string>* warnings) {
+  const Context ctx{positions, warnings};
+  if (positions.empty()) return Error{"buildProbeTopology: positions: no probes"};
+  dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  double maxAbs = 0.0;
+  for (size_t i = 0; i < positions.size(); ++i) {
+    const glm::vec3 p = positions[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+      return Error{"buildProbeTopology: positions[" + std::to_string(i) + "]: not finite"};
+    }
+    lo = glm::min(lo, dvec3(p));
+    hi = glm::max(hi, dvec3(p));
+    maxAbs = std::max({maxAbs, double(std::fabs(p.x)), double(std::fabs(p.y)),
+                       double(std::fabs(p.z))});
+  }
+  const double diag = glm::length(hi - lo);
+  if (positions.size() < 4) {
+    ctx.warn("fewer than 4 probes (" + std::to_string(positions.size()) +
+             "): no tetrahedron is possible; using a lower-dimensional fallback");
+  }
+  // Float spacing at the largest coordinate vs the set's extent.
+  if (diag > 0.0 && maxAbs * 1.2e-7 > 1e-4 * diag) {
+    ctx.warn("large coordinates: probes up to " + fmt(maxAbs) + " from the origin span only " +
+             fmt(diag) + "; float precision limits interpolation (move the origin closer)");
+  }
+
+  const double tol = settings.mergeTolerance * diag;
+  MergeStats merged;
+  const std::vector<int32_t> rep = mergeDuplicates(ctx, lo, tol, merged);
+  if (merged.exact > 0) {
+    const int32_t e = merged.exactExample;
+    ctx.warn(std::to_string(merged.exact) + " duplicate probe positions merged (e.g. positions[" +
+             std::to_string(e) + "] into positions[" + std::to_string(rep[e]) + "])");
+  }
+  if (merged.near > 0) {
+    const int32_t e = merged.nearExample;
+    ctx.warn(std::to_string(merged.near) + " near-duplicate probes (within " + fmt(tol) +
+             ") merged (e.g. positions[" + std::to_string(e) + "] into positions[" +
+             std::to_string(rep[e]) + "])");
+  }
+  std::vector<int32_t> reps;
+  for (size_t i = 0; i < rep.size(); ++i) {
+    if (rep[i] == int32_t(i)) reps.push_back(int32_t(i));
+  }
+
+  ProbeSet set;
+  if (reps.size() == 1) {
+    ctx.warn("a single distinct probe position: every query returns that probe (constant)");
+    set = build0(ctx, reps[0]);
+  } else {
+    // Extreme points: p1 farthest from p0, p2 farthest from their line, p3 from their plane.
+    auto P = [&](int32_t i) { return dvec3(positions[i]); };
+    const dvec3 p0 = P(reps[0]);
+    int32_t i1 = reps[0];
+    for (int32_t r : reps) {
+      if (glm::length(P(r) - p0) > glm::length(P(i1) - p0)) i1 = r;
+    }
+    const dvec3 dir = glm::normalize(P(i1) - p0);
+    int32_t i2 = reps[0];
+    double d2 = 0.0;
+    for (int32_t r : reps) {
+      const double d = glm::length(glm::cross(P(r) - p0, dir));
+      if (d > d2) {
+        d2 = d;
+        i2 = r;
+      }
+    }
+    const double flat = settings.flatTolerance * diag;
+    if (d2 <= flat) {
+      ctx.warn("colinear probes: all " + std::to_string(reps.size()) +
+               " lie on one line; interpolating along segments, constant across the line");
+      set = build1(ctx, reps, p0, dir);
+    } else {
+      const dvec3 n = glm::normalize(glm::cross(P(i1) - p0, P(i2) - p0));
+      double d3 = 0.0;
+      for (int32_t r : reps) d3 = std::max(d3, std::fabs(glm::dot(P(r) - p0, n)));
+      if (d3 <= flat) {
+        ctx.warn("coplanar probes: all " + std::to_string(reps.size()) +
+                 " lie in one plane; using a 2D Delaunay triangulation in the plane, constant "
+                 "along its normal");
+        Result<ProbeSet> r = build2(ctx, reps, p0, dir, n);
+        if (!r) return Error{"buildProbeTopology: " + r.error()};
+        set = std::move(r).value();
+      } else {
+        Result<ProbeSet> r = build3(ctx, reps, settings);
+        if (!r) return Error{"buildProbeTopology: " + r.error()};
+        set = std::move(r).value();
+      }
+    }
+  }
+  if (set.outerCells.size() != set.cells.size() - size_t(set.innerCellCount)) {
+    set.outerCells.resize(set.cells.size() - size_t(set.innerCellCount));
+  }
+  buildProbeSeedGrid(set, settings.cellsPerSeed);
+  Status st = validateProbeSet(set, "buildProbeTopology");
+  if (!st) return Error{st.error()};
+  return set;
+}
+
+}  // namespace kiln

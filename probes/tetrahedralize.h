@@ -1,0 +1,51 @@
+// tetrahedralize.h: probe positions -> the cells and neighbours of a ProbeSet (bake time).
+//
+// Delaunay tetrahedralization (TetGen, or CGAL as the second backend to compare against),
+// then Cupisz's outer cells (GDC 2012, "Light probe interpolation using tetrahedral
+// tessellations") on the convex hull for continuous extrapolation. Degenerate probe sets get
+// a lower-dimensional ProbeSet (see ProbeSet::dimension) and a warning, never a crash:
+//   0 probes                  -> error;
+//   1 distinct position       -> dimension 0: every query gets that probe;
+//   all on a line (incl. 2)   -> dimension 1: segments along the line, clamped at the ends;
+//   all in a plane (incl. 3)  -> dimension 2: 2D Delaunay (CGAL) in the plane, projected
+//                                queries, nearest hull-boundary point outside;
+//   exact / near duplicates   -> merged into the first (within mergeTolerance x diagonal);
+//                                the merged probe keeps its slot but is in no cell;
+//   huge coordinates          -> handled (exact predicates on the float positions) with a
+//                                warning that float precision limits the lookup.
+#pragma once
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "kiln/probe_set.h"
+#include "src/result.h"
+
+namespace kiln {
+
+enum class DelaunayBackend { TetGen, Cgal };
+
+struct ProbeTopologySettings {
+  DelaunayBackend backend = DelaunayBackend::TetGen;
+  // Probes closer than this fraction of the bounds diagonal are merged.
+  double mergeTolerance = 1e-6;
+  // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).
+  double flatTolerance = 1e-6;
+  // Inner cells per seed of the runtime's acceleration grid.
+  int cellsPerSeed = 4;
+};
+
+// Builds the topology for `positions` (world space, metres). The result has zero SH and
+// validity 1 for every probe (the SH bake fills them), cells in a canonical order (each cell's
+// smallest probe index first where orientation allows, cells sorted), so two backends that
+// produce the same triangulation produce identical ProbeSets. Warnings (degenerate input) are
+// appended to *warnings when given. Errors: no probes, non-finite positions, backend failure.
+// Thread-safe (no shared state).
+Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
+                                    const ProbeTopologySettings& settings = {},
+                                    std::vector<std::string>* warnings = nullptr);
+
+}  // namespace kiln

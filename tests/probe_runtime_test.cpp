@@ -1,0 +1,494 @@
+// probe_runtime_test.cpp: the probe lookup (Cupisz 2012): robust orientation, barycentric
+// weights, hinted walks, outer-cell extrapolation, batch and threads, and the .kprobe file
+// (round trip, and rejection of every kind of bad file without crashing).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <random>
+#include <thread>
+
+#include "kiln/predicates.h"
+#include "kiln/probe_runtime.h"
+#include "kiln/probe_set.h"
+#include "probes/tetrahedralize.h"
+
+namespace kiln {
+namespace {
+
+// Probes filling the cube [-1, 1]^3: its 8 corners (so the hull is the cube) and random
+// interior points.
+std::vector<glm::vec3> cubeProbes(int interior, uint32_t seed) {
+  std::vector<glm::vec3> p;
+  for (int i = 0; i < 8; ++i) p.emplace_back(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-0.95f, 0.95f);
+  for (int i = 0; i < interior; ++i) p.emplace_back(u(rng), u(rng), u(rng));
+  return p;
+}
+
+std::vector<glm::vec3> ballProbes(int n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g;
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<glm::vec3> p;
+  for (int i = 0; i < n; ++i) {
+    glm::vec3 d = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    p.push_back(d * (0.3f + 0.7f * std::cbrt(u(rng))));
+  }
+  return p;
+}
+
+ProbeSet build(std::span<const glm::vec3> pts, DelaunayBackend backend) {
+  ProbeTopologySettings s;
+  s.backend = backend;
+  Result<ProbeSet> r = buildProbeTopology(pts, s);
+  EXPECT_TRUE(r.ok()) << r.error();
+  ProbeSet set = r.ok() ? std::move(r).value() : ProbeSet{};
+  // Distinct SH per probe so blends are recognisable.
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (ShL2Rgb& sh : set.sh)
+    for (auto& c : sh.c) c = glm::vec3(u(rng), u(rng), u(rng));
+  return set;
+}
+
+std::map<int32_t, double> weightMap(const ProbeLocation& loc) {
+  std::map<int32_t, double> m;
+  for (int k = 0; k < 4; ++k) m[loc.probes[k]] += loc.weights[k];
+  return m;
+}
+
+double weightDistance(const ProbeLocation& a, const ProbeLocation& b) {
+  auto ma = weightMap(a), mb = weightMap(b);
+  double d = 0.0;
+  for (auto& [k, w] : ma) d = std::max(d, std::fabs(w - (mb.count(k) ? mb[k] : 0.0)));
+  for (auto& [k, w] : mb) d = std::max(d, std::fabs(w - (ma.count(k) ? ma[k] : 0.0)));
+  return d;
+}
+
+void expectSaneWeights(const ProbeLocation& loc) {
+  ASSERT_GE(loc.cell, 0);
+  double sum = 0.0;
+  for (float w : loc.weights) {
+    ASSERT_TRUE(std::isfinite(w));
+    EXPECT_GE(w, -1e-6f);
+    sum += w;
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-6);
+}
+
+glm::dvec3 blendPositions(const ProbeSet& s, const ProbeLocation& loc) {
+  glm::dvec3 r(0.0);
+  for (int k = 0; k < 4; ++k) r += double(loc.weights[k]) * glm::dvec3(s.positions[loc.probes[k]]);
+  return r;
+}
+
+// ---- predicates -------------------------------------------------------------------------
+
+TEST(Predicates, ExactOnCoplanarPointsThatDoubleGetsWrong) {
+  // Points on the plane z = x + y with coordinates whose double evaluation rounds.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1000.0f, 1000.0f);
+  int zeros = 0;
+  for (int i = 0; i < 1000; ++i) {
+    glm::vec3 q[4];
+    for (auto& v : q) {
+      // x and y multiples of 1/64 keep x + y exact in float: the points are exactly coplanar.
+      v.x = std::round(u(rng) * 64.0f) / 64.0f;
+      v.y = std::round(u(rng) * 64.0f) / 64.0f;
+      v.z = v.x + v.y;
+    }
+    zeros += orient3d(q[0], q[1], q[2], q[3]) == 0.0;
+    EXPECT_EQ(orient3dExact(q[0], q[1], q[2], q[3]), 0.0);
+  }
+  EXPECT_EQ(zeros, 1000);
+}
+
+TEST(Predicates, SignMatchesExactNearDegeneracy) {
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int i = 0; i < 2000; ++i) {
+    const glm::vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng),
+                                                                           u(rng));
+    // d very close to the plane abc.
+    const float s = u(rng), t = u(rng);
+    glm::vec3 d = a + s * (b - a) + t * (c - a);
+    d.z = std::nextafter(d.z, i % 2 ? 10.0f : -10.0f);
+    const double fast = orient3d(a, b, c, d), exact = orient3dExact(a, b, c, d);
+    EXPECT_EQ((fast > 0) - (fast < 0), (exact > 0) - (exact < 0));
+  }
+  EXPECT_GT(orient3d(glm::vec3(0), glm::vec3(1, 0, 0), glm::vec3(0, 1, 0), glm::vec3(0, 0, 1)),
+            0.0);
+  EXPECT_DOUBLE_EQ(
+      orient3d(glm::vec3(0), glm::vec3(1, 0, 0), glm::vec3(0, 1, 0), glm::vec3(0, 0, 1)), 1.0);
+}
+
+// ---- lookup -----------------------------------------------------------------------------
+
+TEST(ProbeLookup, WeightsAreBarycentricInsideTheHull) {
+  const auto pts = cubeProbes(300, 1);
+  for (DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal}) {
+    const ProbeSet s = build(pts, backend);
+    std::mt19937 rng(2);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (int i = 0; i < 2000; ++i) {
+      const glm::vec3 p(u(rng), u(rng), u(rng));
+      const ProbeLocation loc = locateProbe(s, p);
+      expectSaneWeights(loc);
+      EXPECT_LT(loc.cell, s.innerCellCount);
+      EXPECT_LT(glm::length(blendPositions(s, loc) - glm::dvec3(p)), 1e-5);
+    }
+  }
+}
+
+TEST(ProbeLookup, AtAProbeItReturnsThatProbesSh) {
+  const auto pts = ballProbes(200, 5);
+  const ProbeSet s = build(pts, DelaunayBackend::TetGen);
+  for (int32_t i = 0; i < s.probeCount(); ++i) {
+    const ShL2Rgb sh = sampleProbes(s, s.positions[i]);
+    for (int k = 0; k < kShL2Count; ++k) {
+      for (int ch = 0; ch < 3; ++ch) {
+        EXPECT_NEAR(sh.c[k][ch], s.sh[i].c[k][ch], 1e-6f) << "probe " << i;
+      }
+    }
+  }
+}
+
+TEST(ProbeLookup, HundredThousandPointsInsideNeedNoScan) {
+  const auto pts = cubeProbes(1000, 6);
+  for (DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal}) {
+    const ProbeSet s = build(pts, backend);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    int located = 0, scans = 0;
+    double steps = 0.0;
+    for (int i = 0; i < 100000; ++i) {
+      const ProbeLocation loc = locateProbe(s, glm::vec3(u(rng), u(rng), u(rng)));
+      located += loc.cell >= 0 && loc.cell < s.innerCellCount;
+      scans += loc.bruteForce;
+      steps += loc.steps;
+    }
+    EXPECT_EQ(located, 100000);
+    EXPECT_EQ(scans, 0);
+    EXPECT_LT(steps / 100000.0, 20.0) << "the seed grid starts walks near their cell";
+  }
+}
+
+TEST(ProbeLookup, HintedWalkFindsTheSameCellsAsUnhinted) {
+  const auto pts = ballProbes(800, 8);
+  const ProbeSet s = build(pts, DelaunayBackend::Cgal);
+  std::mt19937 rng(9);
+  std::normal_distribution<float> g(0.0f, 0.01f);
+  glm::vec3 p(0.0f);
+  int32_t hint = -1;
+  double hintedSteps = 0.0;
+  for (int i = 0; i < 20000; ++i) {
+    p = glm::clamp(p + glm::vec3(g(rng), g(rng), g(rng)), glm::vec3(-1.5f), glm::vec3(1.5f));
+    const ProbeLocation hinted = locateProbe(s, p, hint);
+    const ProbeLocation fresh = locateProbe(s, p);
+    ASSERT_EQ(hinted.cell, fresh.cell) << "step " << i;
+    EXPECT_LT(weightDistance(hinted, fresh), 1e-6);
+    EXPECT_FALSE(hinted.bruteForce);
+    hint = hinted.cell;
+    hintedSteps += hinted.steps;
+  }
+  EXPECT_LT(hintedSteps / 20000.0, 3.0) << "last frame's cell is at most a step or two away";
+}
+
+TEST(ProbeLookup, ExtrapolationIsContinuousAcrossTheHull) {
+  const auto pts = ballProbes(300, 10);
+  for (DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal}) {
+    const ProbeSet s = build(pts, backend);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(0.05f, 0.9f);
+    const float eps = 1e-4f;
+    for (int32_t c = s.innerCellCount; c < s.cellCount(); ++c) {
+      const glm::ivec4 t = s.cells[c];
+      const glm::vec3 a = s.positions[t[0]], b = s.positions[t[1]], cc = s.positions[t[2]];
+      float x = u(rng), y = u(rng);
+      if (x + y > 0.95f) {
+        x *= 0.5f;
+        y *= 0.5f;
+      }
+      const glm::vec3 q = a + x * (b - a) + y * (cc - a);
+      const glm::vec3 n = glm::normalize(glm::cross(b - a, cc - a));
+      const ProbeLocation in = locateProbe(s, q - eps * n), out = locateProbe(s, q + eps * n);
+      expectSaneWeights(in);
+      expectSaneWeights(out);
+      EXPECT_LT(in.cell, s.innerCellCount);
+      EXPECT_EQ(out.cell, c) << "just outside a hull triangle is its outer cell";
+      // Continuity: the gap shrinks with the distance (linearly: thin tetrahedra near the hull
+      // have steep but finite gradients), rather than staying at a jump.
+      const double gap = weightDistance(in, out);
+      const ProbeLocation in10 = locateProbe(s, q - 0.1f * eps * n),
+                          out10 = locateProbe(s, q + 0.1f * eps * n);
+      const double gap10 = weightDistance(in10, out10);
+      EXPECT_LT(gap, 0.5) << "hull triangle " << c;
+      EXPECT_LT(gap10, 0.3 * gap + 2e-6) << "hull triangle " << c;
+    }
+  }
+}
+
+TEST(ProbeLookup, ExtrapolationIsContinuousOutside) {
+  const auto pts = ballProbes(200, 12);
+  const ProbeSet s = build(pts, DelaunayBackend::TetGen);
+  std::mt19937 rng(13);
+  std::normal_distribution<float> g;
+  std::uniform_real_distribution<float> r(1.0f, 4.0f);
+  double worst = 0.0;
+  int outer = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const glm::vec3 d = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    const glm::vec3 p = d * r(rng);
+    const glm::vec3 step = 1e-5f * glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    const ProbeLocation a = locateProbe(s, p), b = locateProbe(s, p + step);
+    expectSaneWeights(a);
+    expectSaneWeights(b);
+    EXPECT_FALSE(a.bruteForce);
+    outer += a.cell >= s.innerCellCount;
+    worst = std::max(worst, weightDistance(a, b));
+  }
+  EXPECT_GT(outer, 15000);
+  EXPECT_LT(worst, 1e-2) << "weights move by O(step) between points 1e-5 apart";
+}
+
+TEST(ProbeLookup, FarAwayPointsGetFiniteWeights) {
+  const auto pts = ballProbes(100, 14);
+  const ProbeSet s = build(pts, DelaunayBackend::TetGen);
+  std::mt19937 rng(15);
+  std::normal_distribution<float> g;
+  for (int i = 0; i < 2000; ++i) {
+    const glm::vec3 p = 1e6f * glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    const ProbeLocation loc = locateProbe(s, p);
+    expectSaneWeights(loc);
+    EXPECT_GE(loc.cell, s.innerCellCount);
+    const ShL2Rgb sh = interpolateProbes(s, loc);
+    for (auto& c : sh.c) EXPECT_TRUE(std::isfinite(c.x) && std::isfinite(c.y));
+  }
+}
+
+TEST(ProbeLookup, BadHintsAreIgnored) {
+  const ProbeSet s = build(cubeProbes(50, 16), DelaunayBackend::TetGen);
+  const glm::vec3 p(0.1f, 0.2f, 0.3f);
+  const ProbeLocation ref = locateProbe(s, p);
+  for (int32_t hint : {-5, -1, s.cellCount(), 1 << 30, s.cellCount() - 1, 0}) {
+    const ProbeLocation loc = locateProbe(s, p, hint);
+    EXPECT_EQ(loc.cell, ref.cell);
+  }
+  // NaN input does not hang or crash; it still returns some cell with sane weights.
+  expectSaneWeights(locateProbe(s, glm::vec3(std::nanf(""), 0.0f, 0.0f)));
+}
+
+TEST(ProbeLookup, BatchMatchesSingleQueriesAndUpdatesHints) {
+  const ProbeSet s = build(ballProbes(300, 17), DelaunayBackend::TetGen);
+  std::mt19937 rng(18);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+  std::vector<glm::vec3> points(500);
+  for (auto& p : points) p = glm::vec3(u(rng), u(rng), u(rng));
+  std::vector<int32_t> hints(points.size(), -1);
+  std::vector<ProbeLocation> locs(points.size());
+  locateProbes(s, points, hints, locs);
+  std::vector<ShL2Rgb> sh(points.size());
+  sampleProbes(s, points, hints, sh);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const ProbeLocation ref = locateProbe(s, points[i]);
+    EXPECT_EQ(locs[i].cell, ref.cell);
+    EXPECT_EQ(hints[i], ref.cell);
+    const ShL2Rgb one = interpolateProbes(s, ref);
+    for (int k = 0; k < kShL2Count; ++k) EXPECT_EQ(sh[i].c[k], one.c[k]);
+  }
+}
+
+TEST(ProbeLookup, ManyThreadsGetTheSameAnswers) {
+  const ProbeSet s = build(ballProbes(500, 19), DelaunayBackend::Cgal);
+  std::mt19937 rng(20);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+  std::vector<glm::vec3> points(4000);
+  for (auto& p : points) p = glm::vec3(u(rng), u(rng), u(rng));
+  std::vector<int32_t> expected(points.size());
+  for (size_t i = 0; i < points.size(); ++i) expected[i] = locateProbe(s, points[i]).cell;
+  std::vector<int> mismatches(4, 0);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      int32_t hint = -1;
+      for (size_t i = 0; i < points.size(); ++i) {
+        const ProbeLocation loc = locateProbe(s, points[i], hint);
+        hint = loc.cell;
+        mismatches[t] += loc.cell != expected[i];
+      }
+    });
+  }
+  for (auto& th : threads) th.join();
+  for (int m : mismatches) EXPECT_EQ(m, 0);
+}
+
+TEST(ProbeLookup, IrradianceOfAConstantEnvironmentIsPiTimesRadiance) {
+  // Constant radiance L: c0 = L * sqrt(4 pi) / ... projection gives c0 = L * 4 pi * Y00.
+  ShL2Rgb sh;
+  sh.c[0] = glm::vec3(1.0f) * (4.0f * 3.14159265f * 0.282095f);
+  const glm::vec3 e = probeIrradiance(sh, glm::vec3(0, 1, 0));
+  EXPECT_NEAR(e.x, 3.14159265f, 1e-3f);  // E = pi L for constant radiance L = 1
+}
+
+// ---- .kprobe file -----------------------------------------------------------------------
+
+std::string tempPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / ("kiln_" + name)).string();
+}
+
+TEST(ProbeFile, RoundTripIsExact) {
+  const ProbeSet s = build(ballProbes(100, 21), DelaunayBackend::TetGen);
+  const std::string path = tempPath("roundtrip.kprobe");
+  ASSERT_TRUE(writeProbeFile(s, path).ok());
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+  Result<ProbeSet> r = loadProbeFile(path);
+  ASSERT_TRUE(r.ok()) << r.error();
+  EXPECT_EQ(serializeProbeSet(*r), serializeProbeSet(s));
+  EXPECT_EQ(r->dimension, 3);
+  std::mt19937 rng(22);
+  std::uniform_real_distribution<float> u(-3.0f, 3.0f);
+  for (int i = 0; i < 200; ++i) {
+    const glm::vec3 p(u(rng), u(rng), u(rng));
+    EXPECT_EQ(locateProbe(s, p).cell, locateProbe(*r, p).cell);
+  }
+  std::filesystem::remove(path);
+}
+
+// A small valid set (dimension 3: 5 probes, 2 tetrahedra, 6 outer cells).
+ProbeSet smallSet() {
+  std::vector<glm::vec3> pts = {glm::vec3(0, 0, 0), glm::vec3(1, 0, 0), glm::vec3(0, 1, 0),
+                                glm::vec3(0, 0, 1), glm::vec3(0.9f, 0.9f, 0.9f)};
+  return build(pts, DelaunayBackend::TetGen);
+}
+
+std::string parseError(const std::vector<uint8_t>& bytes) {
+  Result<ProbeSet> r = parseProbeSet(bytes, "bad.kprobe");
+  return r.ok() ? std::string("(accepted)") : r.error();
+}
+
+TEST(ProbeFile, EveryTruncationIsRejected) {
+  const std::vector<uint8_t> bytes = serializeProbeSet(smallSet());
+  ASSERT_TRUE(parseProbeSet(bytes, "ok").ok());
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    const std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));
+    const std::string e = parseError(cut);
+    ASSERT_EQ(e.rfind("bad.kprobe: ", 0), 0u) << n << ": " << e;
+    EXPECT_TRUE(e.find("truncated") != std::string::npos) << n << ": " << e;
+  }
+  // And through the file reader, at a few offsets.
+  const std::string path = tempPath("truncated.kprobe");
+  for (size_t n : {size_t(0), size_t(3), size_t(71), size_t(72), bytes.size() / 2,
+                   bytes.size() - 1}) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    std::fwrite(bytes.data(), 1, n, f);
+    std::fclose(f);
+    Result<ProbeSet> r = loadProbeFile(path);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().rfind(path + ": ", 0), 0u) << r.error();
+  }
+  std::filesystem::remove(path);
+}
+
+TEST(ProbeFile, HeaderDamageIsNamed) {
+  const std::vector<uint8_t> good = serializeProbeSet(smallSet());
+  auto patched = [&](size_t at, uint32_t value) {
+    std::vector<uint8_t> b = good;
+    std::memcpy(b.data() + at, &value, 4);
+    return parseError(b);
+  };
+  std::vector<uint8_t> b = good;
+  b[0] = 'X';
+  EXPECT_NE(parseError(b).find("magic"), std::string::npos);
+  EXPECT_NE(patched(4, 2).find("version: file version 2"), std::string::npos);
+  EXPECT_NE(patched(8, 7).find("dimension"), std::string::npos);
+  // Huge counts in a small file: rejected from the header, before any allocation.
+  EXPECT_NE(patched(12, 1u << 25).find("size: file has"), std::string::npos);
+  EXPECT_NE(patched(12, 0xFFFFFFFFu).find("probeCount"), std::string::npos);
+  EXPECT_NE(patched(16, 0xFFFFFFFFu).find("cellCount"), std::string::npos);
+  EXPECT_NE(patched(20, 1000).find("innerCellCount"), std::string::npos);
+  EXPECT_NE(patched(24, 5000).find("gridSize[0]"), std::string::npos);
+  b = good;
+  b.push_back(0);
+  EXPECT_NE(parseError(b).find("trailing data"), std::string::npos);
+  b = good;
+  b[good.size() - 5] ^= 0x40;  // payload bit flip
+  EXPECT_NE(parseError(b).find("checksum"), std::string::npos);
+}
+
+TEST(ProbeFile, BadContentIsNamed) {
+  const ProbeSet good = smallSet();
+  {
+    ProbeSet s = good;
+    s.cells[1][2] = 99;
+    EXPECT_NE(parseError(serializeProbeSet(s))
+                  .find("cells[1][2]: probe index 99 out of range (probeCount 5)"),
+              std::string::npos)
+        << parseError(serializeProbeSet(s));
+  }
+  {
+    ProbeSet s = good;
+    s.sh[2].c[4].g = std::nanf("");
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("sh[2][4]: not finite"), std::string::npos);
+  }
+  {
+    ProbeSet s = good;
+    s.positions[3].x = std::numeric_limits<float>::infinity();
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("positions[3]"), std::string::npos);
+  }
+  {
+    ProbeSet s = good;
+    // Point cell 0 at a cell that does not link back.
+    int32_t other = -1;
+    for (int32_t c = 1; c < s.cellCount() && other < 0; ++c) {
+      const glm::ivec4 n = s.neighbours[c];
+      if (n[0] != 0 && n[1] != 0 && n[2] != 0 && n[3] != 0) other = c;
+    }
+    ASSERT_GE(other, 0);
+    s.neighbours[0][0] = other;
+    const std::string e = parseError(serializeProbeSet(s));
+    EXPECT_NE(e.find("neighbours[0][0]"), std::string::npos) << e;
+    EXPECT_NE(e.find("asymmetric"), std::string::npos) << e;
+  }
+  {
+    ProbeSet s = good;
+    s.neighbours[2][1] = 1000;
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("neighbours[2][1]: cell index 1000"),
+              std::string::npos);
+  }
+  {
+    ProbeSet s = good;
+    s.grid.seeds[0] = -3;
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("seeds[0]"), std::string::npos);
+  }
+  {
+    ProbeSet s = good;
+    s.outerCells[0].cubic[2].w = std::nanf("");
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("outerCells[0].cubic"), std::string::npos);
+  }
+  {
+    ProbeSet s = good;
+    s.cells[s.innerCellCount][3] = 2;  // outer cells have -1 in slot 3
+    EXPECT_NE(parseError(serializeProbeSet(s)).find("unused slot must be -1"),
+              std::string::npos);
+  }
+}
+
+TEST(ProbeFile, RandomCorruptionNeverCrashes) {
+  const std::vector<uint8_t> good = serializeProbeSet(smallSet());
+  std::mt19937 rng(23);
+  for (int i = 0; i < 3000; ++i) {
+    std::vector<uint8_t> b = good;
+    const int flips = 1 + int(rng() % 4);
+    for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1u << (rng() % 8));
+    (void)parseProbeSet(b, "fuzz");  // must return, accepted or not
+  }
+  EXPECT_FALSE(loadProbeFile(tempPath("does_not_exist.kprobe")).ok());
+}
+
+}  // namespace
+}  // namespace kiln
