@@ -1,0 +1,378 @@
+// postprocess.cpp: dilation, filling of invalid texels, and the edge-aware à-trous denoiser
+// (Dammertz et al. 2010) for lightmap pages.
+//
+// Every pass reads one buffer and writes another, and each texel's result is a function of
+// the input buffer alone, so rows can run in parallel and results never depend on threads.
+#include "lightmap/postprocess.h"
+
+#include <algorithm>
+#include <array>
+#include <cassert>
+#include <cmath>
+
+namespace kiln {
+
+namespace {
+
+constexpr int kDx[8] = {-1, 0, 1, -1, 1, -1, 0, 1};
+constexpr int kDy[8] = {-1, -1, -1, 0, 0, 1, 1, 1};
+
+ParallelOptions rowOptions(const ParallelOptions& p) {
+  ParallelOptions r = p;
+  r.grain = 4;  // rows
+  r.progress = nullptr;
+  return r;
+}
+
+// One ring of dilation from `in` into `image` / `out`. A texel joins when it is not set, at
+// least one 8-neighbour is set and, when `objectId` is given, belongs to `objectId`'s object
+// (neighbours too). Returns the number of texels filled.
+size_t dilateRing(Image& image, const std::vector<uint8_t>& in, std::vector<uint8_t>& out,
+                  const std::vector<int32_t>* objectId, const ParallelOptions& parallel) {
+  const int w = image.width, h = image.height, c = image.channels;
+  out = in;
+  std::vector<uint32_t> rowCounts(size_t(h), 0);
+  parallelFor(
+      size_t(h),
+      [&](size_t begin, size_t end) {
+        std::vector<double> sum(static_cast<size_t>(c));
+        for (size_t yy = begin; yy < end; ++yy) {
+          const int y = int(yy);
+          for (int x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            if (in[i]) continue;
+            const int32_t id = objectId ? (*objectId)[i] : 0;
+            if (objectId && id < 0) continue;
+            std::fill(sum.begin(), sum.end(), 0.0);
+            int n = 0;
+            for (int k = 0; k < 8; ++k) {
+              const int nx = x + kDx[k], ny = y + kDy[k];
+              if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+              const size_t j = size_t(ny) * w + nx;
+              if (!in[j] || (objectId && (*objectId)[j] != id)) continue;
+              // Reads texels set in `in` only; this ring writes texels unset in `in`.
+              const float* q = image.at(nx, ny);
+              for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += q[ch];
+              ++n;
+            }
+            if (n == 0) continue;
+            float* p = image.at(x, y);
+            for (int ch = 0; ch < c; ++ch) p[ch] = float(sum[size_t(ch)] / n);
+            out[i] = 1;
+            ++rowCounts[yy];
+          }
+        }
+      },
+      rowOptions(parallel));
+  size_t filled = 0;
+  for (uint32_t r : rowCounts) filled += r;
+  return filled;
+}
+
+float texelLuminance(const Image& img, int x, int y) {
+  const float* p = img.at(x, y);
+  return img.channels >= 3 ? luminance(vec3(p[0], p[1], p[2])) : p[0];
+}
+
+vec3 texel3(const Image& img, int x, int y) {
+  const float* p = img.at(x, y);
+  return vec3(p[0], p[1], p[2]);
+}
+
+// 1 / Phi^-1(3/4): the MAD of Gaussian noise times this is its standard deviation.
+constexpr float kMadToSigma = 1.4826f;
+
+// Median of v[0, n) (reorders v): the mean of the two middle values for even n.
+float median(float* v, int n) {
+  std::sort(v, v + n);
+  return n % 2 ? v[n / 2] : 0.5f * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// The 1D B3-spline kernel of Dammertz et al. (the à-trous "h" filter).
+constexpr float kB3[5] = {1.0f / 16.0f, 1.0f / 4.0f, 3.0f / 8.0f, 1.0f / 4.0f, 1.0f / 16.0f};
+
+// Everything the edge-stopping functions need, shared by the noise estimate and the passes.
+struct Guides {
+  const LightmapPage& page;
+  const DenoiseSettings& s;
+  std::vector<float> texelSize;  // h per texel (metres), 0 when there is no position buffer
+
+  bool hasNormal() const { return !page.normal.empty(); }
+  bool hasPosition() const { return !page.position.empty(); }
+
+  bool sameObject(size_t i, size_t j) const {
+    return page.objectId.empty() || page.objectId[i] == page.objectId[j];
+  }
+
+  // Product of the normal and position weights between p and q, q at texel offset
+  // (ox, oy) from p.
+  float geometric(int px, int py, int qx, int qy) const {
+    float w = 1.0f;
+    vec3 np(0.0f);
+    if (hasNormal()) {
+      np = texel3(page.normal, px, py);
+      const float d = std::max(0.0f, glm::dot(np, texel3(page.normal, qx, qy)));
+      w *= std::pow(d, s.sigmaNormal);
+      if (w == 0.0f) return 0.0f;
+    }
+    if (hasPosition()) {
+      const float hp = texelSize[size_t(py) * page.width() + px];
+      if (hp > 0.0f) {
+        const vec3 d = texel3(page.position, qx, qy) - texel3(page.position, px, py);
+        const float plane = hasNormal() ? glm::dot(np, d) : 0.0f;
+        const float ox = float(qx - px), oy = float(qy - py);
+        const float excess =
+            std::max(0.0f, glm::length(d) - 2.0f * hp * std::sqrt(ox * ox + oy * oy));
+        const float sigma = s.sigmaPosition * hp;
+        w *= std::exp(-(plane * plane + excess * excess) / (sigma * sigma));
+      }
+    }
+    return w;
+  }
+};
+
+// World size of each valid texel's edge from its neighbours' positions: per axis the
+// nearer of the two same-object valid neighbours (a chart border has only one, or a far one
+// across a UV gap), averaged over the axes that have one; texels with no neighbour get the
+// page's mean. Only used when the caller gives no texelWorldSize.
+std::vector<float> estimateTexelSize(const LightmapPage& page) {
+  const int w = page.width(), h = page.height();
+  std::vector<float> size(page.texelCount(), 0.0f);
+  auto ok = [&](size_t i, int x, int y) {
+    if (x < 0 || y < 0 || x >= w || y >= h) return false;
+    const size_t j = size_t(y) * w + x;
+    return page.valid[j] && (page.objectId.empty() || page.objectId[i] == page.objectId[j]);
+  };
+  double total = 0.0;
+  size_t count = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t i = size_t(y) * w + x;
+      if (!page.valid[i]) continue;
+      const vec3 p = texel3(page.position, x, y);
+      float sum = 0.0f;
+      int axes = 0;
+      for (int axis = 0; axis < 2; ++axis) {
+        float best = kInfinity;
+        for (int sgn = -1; sgn <= 1; sgn += 2) {
+          const int nx = x + (axis == 0 ? sgn : 0), ny = y + (axis == 1 ? sgn : 0);
+          if (!ok(i, nx, ny)) continue;
+          best = std::min(best, glm::length(texel3(page.position, nx, ny) - p));
+        }
+        if (best < kInfinity) {
+          sum += best;
+          ++axes;
+        }
+      }
+      if (axes > 0) {
+        size[i] = sum / float(axes);
+        total += size[i];
+        ++count;
+      }
+    }
+  const float mean = count ? float(total / double(count)) : 0.0f;
+  for (size_t i = 0; i < size.size(); ++i)
+    if (page.valid[i] && size[i] <= 0.0f) size[i] = mean;
+  return size;
+}
+
+}  // namespace
+
+std::vector<uint8_t> dilate(Image& image, const std::vector<uint8_t>& valid, int iterations,
+                            const ParallelOptions& parallel) {
+  assert(valid.size() == size_t(image.width) * size_t(image.height));
+  std::vector<uint8_t> mask = valid, next;
+  for (int ring = 0; iterations <= 0 || ring < iterations; ++ring) {
+    if (dilateRing(image, mask, next, nullptr, parallel) == 0) break;
+    mask.swap(next);
+  }
+  return mask;
+}
+
+std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid,
+                                 const std::vector<int32_t>& objectId,
+                                 const FillSettings& settings) {
+  const int w = image.width, h = image.height, c = image.channels;
+  assert(valid.size() == size_t(w) * size_t(h));
+  assert(objectId.empty() || objectId.size() == valid.size());
+  const std::vector<int32_t> oneObject =
+      objectId.empty() ? std::vector<int32_t>(valid.size(), 0) : std::vector<int32_t>();
+  const std::vector<int32_t>& ids = objectId.empty() ? oneObject : objectId;
+  const int r = std::max(0, int(std::floor(settings.radius)));
+  const float r2 = settings.radius * settings.radius;
+
+  // Shepard pass: reads valid texels only and writes invalid ones, so in place is safe.
+  std::vector<uint8_t> mask = valid;
+  parallelFor(
+      size_t(h),
+      [&](size_t begin, size_t end) {
+        std::vector<double> sum(static_cast<size_t>(c));
+        for (size_t yy = begin; yy < end; ++yy) {
+          const int y = int(yy);
+          for (int x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            if (valid[i] || ids[i] < 0) continue;
+            std::fill(sum.begin(), sum.end(), 0.0);
+            double weight = 0.0;
+            for (int dy = -r; dy <= r; ++dy)
+              for (int dx = -r; dx <= r; ++dx) {
+                const int d2 = dx * dx + dy * dy;
+                const int nx = x + dx, ny = y + dy;
+                if (d2 == 0 || float(d2) > r2 || nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+                const size_t j = size_t(ny) * w + nx;
+                if (!valid[j] || ids[j] != ids[i]) continue;
+                const double wq = 1.0 / double(d2);
+                const float* q = image.at(nx, ny);
+                for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += wq * q[ch];
+                weight += wq;
+              }
+            if (weight <= 0.0) continue;
+            float* p = image.at(x, y);
+            for (int ch = 0; ch < c; ++ch) p[ch] = float(sum[size_t(ch)] / weight);
+            mask[i] = 1;
+          }
+        }
+      },
+      rowOptions(settings.parallel));
+
+  // Fallback: same-object rings for texels farther than `radius` from any valid texel.
+  std::vector<uint8_t> next;
+  while (dilateRing(image, mask, next, &ids, settings.parallel) > 0) mask.swap(next);
+  return mask;
+}
+
+void denoise(LightmapPage& page, const DenoiseSettings& settings) {
+  const int w = page.width(), h = page.height(), c = page.radiance.channels;
+  const size_t n = page.texelCount();
+  assert(page.valid.size() == n);
+  assert(page.objectId.empty() || page.objectId.size() == n);
+  assert(page.normal.empty() ||
+         (page.normal.width == w && page.normal.height == h && page.normal.channels >= 3));
+  assert(page.position.empty() ||
+         (page.position.width == w && page.position.height == h && page.position.channels >= 3));
+  assert(page.variance.empty() || page.variance.size() == n);
+  assert(page.texelWorldSize.empty() || page.texelWorldSize.size() == n);
+  if (settings.strength <= 0.0f || settings.iterations <= 0 || n == 0) return;
+
+  Guides g{page, settings, {}};
+  if (g.hasPosition())
+    g.texelSize = page.texelWorldSize.empty() ? estimateTexelSize(page) : page.texelWorldSize;
+  const ParallelOptions rows = rowOptions(settings.parallel);
+
+  // Noise standard deviation per texel: from the given variance, or else a spatial estimate
+  // over the geometrically compatible valid 3x3 neighbours, as SVGF does without history;
+  // but robust: the median absolute deviation (x 1.4826, consistent for Gaussian noise)
+  // rather than the standard deviation, so that a texel beside a shadow edge, with at most
+  // 3 of its 9 neighbours across the edge, measures its own side's noise and not the step.
+  // Texels with fewer than three such texels get the page's mean estimate.
+  std::vector<float> sigma(n, 0.0f);
+  if (!page.variance.empty()) {
+    for (size_t i = 0; i < n; ++i) sigma[i] = std::sqrt(std::max(0.0f, page.variance[i]));
+  } else {
+    std::vector<uint8_t> estimated(n, 0);
+    parallelFor(
+        size_t(h),
+        [&](size_t begin, size_t end) {
+          for (size_t yy = begin; yy < end; ++yy) {
+            const int y = int(yy);
+            for (int x = 0; x < w; ++x) {
+              const size_t i = size_t(y) * w + x;
+              if (!page.valid[i]) continue;
+              std::array<float, 9> lum;
+              int count = 0;
+              for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                  const int qx = x + dx, qy = y + dy;
+                  if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+                  const size_t j = size_t(qy) * w + qx;
+                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
+                  if (g.geometric(x, y, qx, qy) < 0.5f) continue;
+                  lum[size_t(count++)] = texelLuminance(page.radiance, qx, qy);
+                }
+              if (count < 3) continue;
+              const float med = median(lum.data(), count);
+              for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
+              sigma[i] = kMadToSigma * median(lum.data(), count);
+              estimated[i] = 1;
+            }
+          }
+        },
+        rows);
+    double total = 0.0;
+    size_t count = 0;
+    for (size_t i = 0; i < n; ++i)
+      if (estimated[i]) {
+        total += sigma[i];
+        ++count;
+      }
+    const float mean = count ? float(total / double(count)) : 0.0f;
+    for (size_t i = 0; i < n; ++i)
+      if (page.valid[i] && !estimated[i]) sigma[i] = mean;
+  }
+
+  // Variance of each texel's current value, carried through the passes as SVGF does: a
+  // weighted mean with weights w has variance sum(w^2 var) / (sum w)^2 (neighbours taken as
+  // independent), so the luminance threshold shrinks as the noise does.
+  std::vector<float> var(n), nextVar(n, 0.0f);
+  for (size_t i = 0; i < n; ++i) var[i] = sigma[i] * sigma[i];
+
+  const Image input = page.radiance;
+  Image src = page.radiance, dst = page.radiance;
+  for (int pass = 0; pass < settings.iterations; ++pass) {
+    const int step = 1 << pass;
+    parallelFor(
+        size_t(h),
+        [&](size_t begin, size_t end) {
+          std::vector<double> sum(static_cast<size_t>(c));
+          for (size_t yy = begin; yy < end; ++yy) {
+            const int y = int(yy);
+            for (int x = 0; x < w; ++x) {
+              const size_t i = size_t(y) * w + x;
+              if (!page.valid[i]) continue;  // dst already holds the input value
+              const float lp = texelLuminance(src, x, y);
+              const float sl = settings.sigmaLuminance * std::sqrt(var[i]);
+              std::fill(sum.begin(), sum.end(), 0.0);
+              double weight = 0.0, weightedVar = 0.0;
+              for (int ky = 0; ky < 5; ++ky) {
+                const int qy = y + (ky - 2) * step;
+                if (qy < 0 || qy >= h) continue;
+                for (int kx = 0; kx < 5; ++kx) {
+                  const int qx = x + (kx - 2) * step;
+                  if (qx < 0 || qx >= w) continue;
+                  const size_t j = size_t(qy) * w + qx;
+                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
+                  float wq = kB3[kx] * kB3[ky];
+                  if (j != i) {
+                    wq *= g.geometric(x, y, qx, qy);
+                    const float dl = std::abs(texelLuminance(src, qx, qy) - lp);
+                    // sl == 0 (a noise-free texel): only equal luminance mixes.
+                    wq *= sl > 0.0f ? std::exp(-dl / sl) : (dl == 0.0f ? 1.0f : 0.0f);
+                    if (wq <= 0.0f) continue;
+                  }
+                  const float* q = src.at(qx, qy);
+                  for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += double(wq) * q[ch];
+                  weight += wq;
+                  weightedVar += double(wq) * wq * var[j];
+                }
+              }
+              float* out = dst.at(x, y);
+              for (int ch = 0; ch < c; ++ch) out[ch] = float(sum[size_t(ch)] / weight);
+              nextVar[i] = float(weightedVar / (weight * weight));
+            }
+          }
+        },
+        rows);
+    std::swap(src, dst);
+    std::swap(var, nextVar);
+  }
+
+  if (settings.strength >= 1.0f) {
+    page.radiance = std::move(src);
+    return;
+  }
+  for (size_t k = 0; k < input.pixels.size(); ++k)
+    page.radiance.pixels[k] =
+        input.pixels[k] + settings.strength * (src.pixels[k] - input.pixels[k]);
+}
+
+}  // namespace kiln

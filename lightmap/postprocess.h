@@ -1,0 +1,97 @@
+// postprocess.h: the lightmap page post-process (MISSION.md "Lightmaps: Post"): filling
+// invalid texels from valid neighbours, dilation into padding, and an edge-aware à-trous
+// denoiser guided by normals and positions (Dammertz et al. 2010, "Edge-Avoiding À-Trous
+// Wavelet Transform for fast Global Illumination Filtering").
+//
+// Everything works on plain images and masks: a page is W x H texels, row-major from the top
+// row (row 0 = v 0, MISSION.md "Conventions"), texel values are E/pi (linear). Masks are
+// W x H bytes, 1 = set. Suggested order: fillInvalid, denoise, dilate, then seam stitching
+// (lightmap/seams.h), which reads the texels bilinear filtering reads at chart borders.
+// All functions are deterministic: results do not depend on the thread count.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "src/image.h"
+#include "src/parallel.h"
+
+namespace kiln {
+
+// A working view of one lightmap page with the guide buffers the denoiser needs. All
+// per-texel vectors are W x H, row-major from the top row; optional ones may be empty.
+struct LightmapPage {
+  Image radiance;                 // W x H, >= 1 channels (RGB E/pi); filtered in place
+  std::vector<uint8_t> valid;     // 1 = a texel with a trusted value; 0 = padding/empty/invalid
+  std::vector<int32_t> objectId;  // scene object per texel, -1 = none; empty = one object
+  Image normal;                   // W x H x 3, world unit shading normal; empty = no normal term
+  Image position;                 // W x H x 3, world position (metres); empty = no position term
+  // Optional variance of each texel's luminance estimate (e.g. sample variance / sample
+  // count). Empty: the denoiser estimates the noise level from each texel's 3x3 neighbours.
+  std::vector<float> variance;
+  // Optional world size of a texel's edge (metres), e.g. 1 / AtlasObject::texelsPerUnit.
+  // Empty: estimated from the distances to neighbouring texels' positions.
+  std::vector<float> texelWorldSize;
+
+  int width() const { return radiance.width; }
+  int height() const { return radiance.height; }
+  size_t texelCount() const { return size_t(radiance.width) * size_t(radiance.height); }
+};
+
+// Dilation into padding: every texel without a value (mask 0) that has at least one texel
+// with a value among its 8 neighbours gets the plain average of those neighbours; the newly
+// filled ring then takes part in the next ring. Runs `iterations` rings (<= 0: until every
+// texel is filled or nothing changes), so bilinear filtering at chart borders reads the
+// border colour instead of black. Texels with mask 1 are never changed. All channels are
+// dilated. Returns the mask of texels holding a value afterwards (`valid` | filled).
+// `valid` must hold width x height entries.
+std::vector<uint8_t> dilate(Image& image, const std::vector<uint8_t>& valid, int iterations,
+                            const ParallelOptions& parallel = {});
+
+struct FillSettings {
+  float radius = 3.0f;  // texels: valid texels at Euclidean texel distance <= radius are used
+  ParallelOptions parallel;
+};
+
+// Fills the texels that belong to an object (objectId >= 0) but are not valid, e.g. texels
+// whose rays mostly saw back faces (inside geometry): each gets the inverse-square-distance
+// weighted average (Shepard interpolation, weight 1 / d^2 with d in texels) of the valid
+// texels of the same object within `radius`. Texels with none in reach are then filled ring
+// by ring from their filled or valid same-object 8-neighbours (dilation restricted to the
+// object) until none is left that can be reached. Padding (objectId < 0) is left for dilate.
+// `objectId` empty = all texels belong to one object. Returns the mask afterwards
+// (`valid` | filled). Weights use valid texels only, so the result is order-independent.
+std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid,
+                                 const std::vector<int32_t>& objectId,
+                                 const FillSettings& settings = {});
+
+struct DenoiseSettings {
+  // À-trous passes with steps 1, 2, 4, ...: 5 passes reach +-2 x 16 = 32 texels.
+  int iterations = 5;
+  // Normal edge-stopping weight max(0, dot(n_p, n_q))^sigmaNormal (as in SVGF, Schied et al.
+  // 2017; Dammertz uses a Gaussian of |n_p - n_q|, which behaves the same for small angles).
+  float sigmaNormal = 64.0f;
+  // Position weight exp(-(plane^2 + excess^2) / (sigmaPosition h)^2), with h the texel's world
+  // size, plane = |dot(n_p, x_q - x_p)| the distance of q from p's tangent plane, excess how
+  // far |x_q - x_p| exceeds twice the texel distance (charts adjacent in UV but apart in 3D).
+  float sigmaPosition = 1.0f;
+  // Luminance weight exp(-|l_p - l_q| / (sigmaLuminance sigma_p)), sigma_p the standard
+  // deviation of p's current value: sqrt(variance) or the spatial estimate at the start,
+  // then carried through the passes as SVGF does (Schied et al. 2017), so the threshold
+  // shrinks with the noise. 3 keeps a 5-sigma shadow edge within ~5% of its level while
+  // reducing flat-region noise ~8x (lightmap_post_test); smaller is sharper and noisier.
+  float sigmaLuminance = 3.0f;
+  // Blend between input (0) and fully filtered (1). 0 returns the page unchanged bit for bit.
+  float strength = 1.0f;
+  ParallelOptions parallel;
+};
+
+// Edge-aware à-trous wavelet filter (Dammertz et al. 2010) of page.radiance, in place: each
+// pass convolves with the 5x5 B3-spline kernel (1/16, 1/4, 3/8, 1/4, 1/16)^2 dilated by the
+// pass's step, multiplied by the normal, position and luminance weights above and
+// renormalised. Only valid texels contribute and only valid texels change; texels of
+// different objects never mix. All channels are filtered with weights from the luminance of
+// the first three (or the first, for grey images). Deterministic at any thread count.
+void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
+
+}  // namespace kiln
