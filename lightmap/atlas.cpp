@@ -1,0 +1,314 @@
+// atlas.cpp: lightmap atlas packing (texel density rule, skyline packing into power-of-two
+// pages) and its manifest form for --lock-atlas.
+#include "lightmap/atlas.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "lightmap/skyline_packer.h"
+
+namespace kiln {
+
+namespace {
+
+std::string describe(const Object& o) {
+  return "object '" + o.name + "' (nodeIndex " + std::to_string(o.nodeIndex) + ")";
+}
+
+// Rounds texel extents up, tolerating float noise on exact integers.
+int texelsUp(double x) { return std::max(1, int(std::ceil(x - 1e-4))); }
+
+// UV1 triangle area (sum of |areas|) and world area, in double.
+struct AreaPair {
+  double uv = 0.0, world = 0.0;
+};
+AreaPair areas(const Object& o) {
+  AreaPair a;
+  for (uint32_t t = 0; t < o.triangles.size(); ++t) {
+    const uvec3 tri = o.triangles[t];
+    const glm::dvec2 u0(o.uv1[tri.x]), u1(o.uv1[tri.y]), u2(o.uv1[tri.z]);
+    const glm::dvec2 e1 = u1 - u0, e2 = u2 - u0;
+    a.uv += 0.5 * std::abs(e1.x * e2.y - e1.y * e2.x);
+    const glm::dvec3 p0(o.positions[tri.x]), p1(o.positions[tri.y]), p2(o.positions[tri.z]);
+    a.world += 0.5 * glm::length(glm::cross(p1 - p0, p2 - p0));
+  }
+  return a;
+}
+
+// Candidate page sizes no larger than maxSize, smallest area first: powers of two w x w and
+// w x w/2, and maxSize x maxSize (and x its previous size) when maxSize is no power of two.
+std::vector<glm::ivec2> pageSizes(int maxSize) {
+  std::vector<int> sides;
+  for (int s = 1; s < maxSize; s *= 2) sides.push_back(s);
+  sides.push_back(maxSize);
+  std::vector<glm::ivec2> sizes;
+  for (size_t i = 0; i < sides.size(); ++i) {
+    if (i > 0) sizes.push_back(glm::ivec2(sides[i], sides[i - 1]));
+    sizes.push_back(glm::ivec2(sides[i], sides[i]));
+  }
+  std::stable_sort(sizes.begin(), sizes.end(), [](glm::ivec2 a, glm::ivec2 b) {
+    return int64_t(a.x) * a.y < int64_t(b.x) * b.y;
+  });
+  return sizes;
+}
+
+// Packs `items` (indices into `sizes`, in order) into a bin of page size `page` with padding
+// p: the bin is (W - p) x (H - p) and items are (w + p) x (h + p), placed at p + corner.
+// Returns false when one does not fit.
+bool packPage(glm::ivec2 page, int padding, const std::vector<uint32_t>& items,
+              const std::vector<glm::ivec2>& sizes, std::vector<glm::ivec2>& corners) {
+  if (page.x - padding < 1 || page.y - padding < 1) return false;
+  SkylinePacker packer(page.x - padding, page.y - padding);
+  for (uint32_t i : items) {
+    const auto at = packer.insert(sizes[i].x + padding, sizes[i].y + padding);
+    if (!at) return false;
+    corners[i] = *at + glm::ivec2(padding);
+  }
+  return true;
+}
+
+vec4 scaleOffsetFor(vec2 lo, vec2 hi, glm::ivec2 texelMin, glm::ivec2 texelSize, AtlasPage page) {
+  const double sx = double(texelSize.x) / ((double(hi.x) - lo.x) * page.width);
+  const double sy = double(texelSize.y) / ((double(hi.y) - lo.y) * page.height);
+  const double ox = double(texelMin.x) / page.width - lo.x * sx;
+  const double oy = double(texelMin.y) / page.height - lo.y * sy;
+  return vec4(float(sx), float(sy), float(ox), float(oy));
+}
+
+}  // namespace
+
+bool isLightmapped(const Object& object) {
+  return object.settings.isStatic && object.settings.scaleInLightmap > 0.0f &&
+         object.settings.receiveGI == ReceiveGI::Lightmaps && !object.triangles.empty();
+}
+
+std::pair<vec2, vec2> uv1Bounds(const Object& object) {
+  vec2 lo(kInfinity), hi(-kInfinity);
+  for (const uvec3& tri : object.triangles)
+    for (int k = 0; k < 3; ++k) {
+      lo = glm::min(lo, object.uv1[tri[k]]);
+      hi = glm::max(hi, object.uv1[tri[k]]);
+    }
+  return {lo, hi};
+}
+
+Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings) {
+  const int p = settings.padding;
+  if (p < 0) return Error{"lightmap padding must be >= 0 (got " + std::to_string(p) + ")"};
+  if (!(settings.resolution > 0.0f) || !std::isfinite(settings.resolution))
+    return Error{"lightmap resolution must be > 0 texels per unit (got " +
+                 std::to_string(settings.resolution) + ")"};
+  if (settings.maxSize < 1 + 2 * p)
+    return Error{"lightmap maxSize " + std::to_string(settings.maxSize) +
+                 " cannot hold one texel with padding " + std::to_string(p) +
+                 " on each side (needs maxSize >= 1 + 2 x padding = " + std::to_string(1 + 2 * p) +
+                 ")"};
+
+  if (settings.locked) {
+    const AtlasLayout& locked = *settings.locked;
+    if (locked.objects.size() != scene.objects.size())
+      return Error{"locked atlas has " + std::to_string(locked.objects.size()) +
+                   " objects, the scene " + std::to_string(scene.objects.size())};
+    for (size_t i = 0; i < scene.objects.size(); ++i) {
+      const int page = locked.objects[i].lightmapIndex;
+      if (isLightmapped(scene.objects[i]) != (page >= 0))
+        return Error{"locked atlas: " + describe(scene.objects[i]) +
+                     (page >= 0 ? " has a lightmap in the locked atlas but is not lightmapped"
+                                : " is lightmapped but has no lightmap in the locked atlas")};
+      if (page >= int(locked.pages.size()))
+        return Error{"locked atlas: " + describe(scene.objects[i]) + ": lightmapIndex " +
+                     std::to_string(page) + " out of range"};
+    }
+    return locked;
+  }
+
+  AtlasLayout layout;
+  layout.objects.resize(scene.objects.size());
+  const int limit = settings.maxSize - 2 * p;  // largest object side, texels
+  std::vector<uint32_t> lightmapped;
+  std::vector<glm::ivec2> sizes(scene.objects.size(), glm::ivec2(0));
+  std::vector<std::pair<vec2, vec2>> bounds(scene.objects.size());
+  for (uint32_t i = 0; i < scene.objects.size(); ++i) {
+    const Object& o = scene.objects[i];
+    if (!isLightmapped(o)) continue;
+    if (o.uv1.size() != o.positions.size())
+      return Error{describe(o) + ": has no lightmap UVs (TEXCOORD_1); generate them first"};
+    bounds[i] = uv1Bounds(o);
+    const auto [lo, hi] = bounds[i];
+    const AreaPair a = areas(o);
+    if (!(a.uv > 0.0) || !(hi.x > lo.x) || !(hi.y > lo.y) || !std::isfinite(a.uv))
+      return Error{describe(o) + ": its lightmap UVs (TEXCOORD_1) have zero area"};
+    // Texels per UV unit so that the triangles get (resolution x scale)^2 x world area texels.
+    const double density = double(settings.resolution) * o.settings.scaleInLightmap;
+    double k = density * std::sqrt(a.world / a.uv);
+    const double eu = double(hi.x) - lo.x, ev = double(hi.y) - lo.y;
+    glm::ivec2 size(texelsUp(k * eu), texelsUp(k * ev));
+    if (std::max(size.x, size.y) > limit) {
+      k *= double(limit) / std::max(k * eu, k * ev);
+      size = glm::min(glm::ivec2(texelsUp(k * eu), texelsUp(k * ev)), glm::ivec2(limit));
+      std::ostringstream w;
+      w << describe(o) << ": lightmap scaled down to " << size.x << " x " << size.y
+        << " texels to fit maxSize " << settings.maxSize << " with padding " << p << " ("
+        << k * std::sqrt(a.uv / a.world) << " instead of " << density << " texels per unit)";
+      layout.warnings.push_back(w.str());
+    }
+    sizes[i] = size;
+    layout.objects[i].texelSize = size;
+    layout.objects[i].texelsPerUnit = float(k * std::sqrt(a.uv / a.world));
+    lightmapped.push_back(i);
+  }
+
+  // Fill maxSize pages in packing order; then shrink each page.
+  std::vector<glm::ivec2> sortKey(lightmapped.size());
+  for (size_t j = 0; j < lightmapped.size(); ++j) sortKey[j] = sizes[lightmapped[j]];
+  std::vector<uint32_t> remaining;
+  for (uint32_t j : packingOrder(sortKey)) remaining.push_back(lightmapped[j]);
+  const std::vector<glm::ivec2> candidates = pageSizes(settings.maxSize);
+  std::vector<glm::ivec2> corners(scene.objects.size());
+  while (!remaining.empty()) {
+    SkylinePacker packer(settings.maxSize - p, settings.maxSize - p);
+    std::vector<uint32_t> members, rest;
+    for (uint32_t i : remaining) {
+      if (packer.insert(sizes[i].x + p, sizes[i].y + p))
+        members.push_back(i);
+      else
+        rest.push_back(i);
+    }
+    if (members.empty())  // cannot happen: sizes are clamped to fit an empty page
+      return Error{describe(scene.objects[remaining.front()]) + ": does not fit a lightmap page"};
+    AtlasPage page;
+    for (glm::ivec2 c : candidates)
+      if (packPage(c, p, members, sizes, corners)) {
+        page.width = c.x;
+        page.height = c.y;
+        break;
+      }
+    assert(page.width > 0);
+    const int index = int(layout.pages.size());
+    layout.pages.push_back(page);
+    for (uint32_t i : members) {
+      AtlasObject& ao = layout.objects[i];
+      ao.lightmapIndex = index;
+      ao.texelMin = corners[i];
+      ao.scaleOffset =
+          scaleOffsetFor(bounds[i].first, bounds[i].second, ao.texelMin, ao.texelSize, page);
+    }
+    remaining = std::move(rest);
+  }
+  return layout;
+}
+
+nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene) {
+  nlohmann::json j;
+  j["lightmaps"] = nlohmann::json::array();
+  for (size_t i = 0; i < layout.pages.size(); ++i)
+    j["lightmaps"].push_back(
+        {{"index", i}, {"width", layout.pages[i].width}, {"height", layout.pages[i].height}});
+  j["objects"] = nlohmann::json::array();
+  for (size_t i = 0; i < layout.objects.size() && i < scene.objects.size(); ++i) {
+    const AtlasObject& o = layout.objects[i];
+    j["objects"].push_back(
+        {{"node", scene.objects[i].name},
+         {"nodeIndex", scene.objects[i].nodeIndex},
+         {"lightmapIndex", o.lightmapIndex},
+         {"scaleOffset", {o.scaleOffset.x, o.scaleOffset.y, o.scaleOffset.z, o.scaleOffset.w}}});
+  }
+  return j;
+}
+
+Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scene& scene) {
+  const std::string where = "lock-atlas manifest";
+  if (!manifest.is_object() || !manifest.contains("lightmaps") ||
+      !manifest["lightmaps"].is_array() || !manifest.contains("objects") ||
+      !manifest["objects"].is_array())
+    return Error{where + ": needs arrays \"lightmaps\" and \"objects\""};
+  const nlohmann::json& pages = manifest["lightmaps"];
+  AtlasLayout layout;
+  layout.pages.resize(pages.size());
+  std::vector<bool> seen(pages.size(), false);
+  for (size_t i = 0; i < pages.size(); ++i) {
+    const nlohmann::json& pj = pages[i];
+    const std::string at = where + ": lightmaps[" + std::to_string(i) + "]";
+    if (!pj.is_object() || !pj.contains("index") || !pj["index"].is_number_integer() ||
+        !pj.contains("width") || !pj["width"].is_number_integer() || !pj.contains("height") ||
+        !pj["height"].is_number_integer())
+      return Error{at + ": needs integer \"index\", \"width\" and \"height\""};
+    const int64_t index = pj["index"].get<int64_t>();
+    if (index < 0 || index >= int64_t(pages.size()) || seen[size_t(index)])
+      return Error{at + ": index " + std::to_string(index) + " is out of range or repeated"};
+    seen[size_t(index)] = true;
+    const int64_t w = pj["width"].get<int64_t>(), h = pj["height"].get<int64_t>();
+    if (w < 1 || h < 1 || w > 65536 || h > 65536)
+      return Error{at + ": size " + std::to_string(w) + " x " + std::to_string(h) + " is invalid"};
+    layout.pages[size_t(index)] = AtlasPage{int(w), int(h)};
+  }
+
+  std::map<int, uint32_t> byNode;
+  for (uint32_t i = 0; i < scene.objects.size(); ++i) byNode[scene.objects[i].nodeIndex] = i;
+  layout.objects.resize(scene.objects.size());
+  std::vector<bool> listed(scene.objects.size(), false);
+  const nlohmann::json& objects = manifest["objects"];
+  for (size_t e = 0; e < objects.size(); ++e) {
+    const nlohmann::json& oj = objects[e];
+    const std::string at = where + ": objects[" + std::to_string(e) + "]";
+    if (!oj.is_object() || !oj.contains("nodeIndex") || !oj["nodeIndex"].is_number_integer() ||
+        !oj.contains("lightmapIndex") || !oj["lightmapIndex"].is_number_integer())
+      return Error{at + ": needs integer \"nodeIndex\" and \"lightmapIndex\""};
+    const int node = oj["nodeIndex"].get<int>();
+    const std::string name =
+        oj.contains("node") && oj["node"].is_string() ? oj["node"].get<std::string>() : "";
+    const auto found = byNode.find(node);
+    if (found == byNode.end())
+      return Error{at + ": node '" + name + "' (nodeIndex " + std::to_string(node) +
+                   ") has no mesh object in the scene"};
+    const uint32_t i = found->second;
+    const Object& o = scene.objects[i];
+    if (oj.contains("node") && name != o.name)
+      return Error{at + ": nodeIndex " + std::to_string(node) + " is '" + name +
+                   "' in the manifest but '" + o.name + "' in the scene"};
+    if (listed[i]) return Error{at + ": " + describe(o) + " is listed twice"};
+    listed[i] = true;
+    const int page = oj["lightmapIndex"].get<int>();
+    if (page < 0) continue;
+    if (page >= int(layout.pages.size()))
+      return Error{at + ": lightmapIndex " + std::to_string(page) + " but the manifest has " +
+                   std::to_string(layout.pages.size()) + " lightmaps"};
+    if (!isLightmapped(o))
+      return Error{at + ": " + describe(o) +
+                   " has a lightmap in the manifest but is not lightmapped in the scene "
+                   "(static, scaleInLightmap or receiveGI changed)"};
+    if (o.uv1.size() != o.positions.size())
+      return Error{at + ": " + describe(o) + " has no lightmap UVs (TEXCOORD_1)"};
+    const nlohmann::json& so = oj.contains("scaleOffset") ? oj["scaleOffset"] : nlohmann::json();
+    if (!so.is_array() || so.size() != 4 ||
+        !std::all_of(so.begin(), so.end(), [](const nlohmann::json& x) { return x.is_number(); }))
+      return Error{at + ": scaleOffset must be 4 numbers"};
+    AtlasObject& ao = layout.objects[i];
+    ao.lightmapIndex = page;
+    ao.scaleOffset =
+        vec4(so[0].get<float>(), so[1].get<float>(), so[2].get<float>(), so[3].get<float>());
+    const AtlasPage pg = layout.pages[size_t(page)];
+    const auto [lo, hi] = uv1Bounds(o);
+    const glm::dvec2 s(ao.scaleOffset.x, ao.scaleOffset.y), off(ao.scaleOffset.z, ao.scaleOffset.w);
+    const glm::dvec2 dims(pg.width, pg.height);
+    const glm::dvec2 a = (glm::dvec2(lo) * s + off) * dims, b = (glm::dvec2(hi) * s + off) * dims;
+    ao.texelMin = glm::ivec2(glm::round(a));
+    ao.texelSize = glm::ivec2(glm::round(b - a));
+    if (ao.texelMin.x < 0 || ao.texelMin.y < 0 || ao.texelSize.x < 1 || ao.texelSize.y < 1 ||
+        ao.texelMin.x + ao.texelSize.x > pg.width || ao.texelMin.y + ao.texelSize.y > pg.height)
+      return Error{at + ": " + describe(o) + ": scaleOffset puts its UV1 rectangle outside " +
+                   "lightmap " + std::to_string(page) + " (did its TEXCOORD_1 change?)"};
+    const AreaPair ar = areas(o);
+    ao.texelsPerUnit = ar.world > 0.0 ? float(s.x * dims.x * std::sqrt(ar.uv / ar.world)) : 0.0f;
+  }
+  for (uint32_t i = 0; i < scene.objects.size(); ++i)
+    if (isLightmapped(scene.objects[i]) && layout.objects[i].lightmapIndex < 0)
+      return Error{where + ": " + describe(scene.objects[i]) +
+                   " is lightmapped but the manifest gives it no lightmap"};
+  return layout;
+}
+
+}  // namespace kiln

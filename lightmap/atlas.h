@@ -1,0 +1,89 @@
+// atlas.h: packing lightmapped objects into lightmap pages (MISSION.md "Lightmaps: Atlas").
+//
+// Each lightmapped object's UV1 bounding rectangle becomes one rectangle of texels whose size
+// gives it `resolution x scaleInLightmap` texels per world unit (Unity's rule); rectangles are
+// packed (skyline bottom-left, Jylänki 2010) into pages of at most maxSize x maxSize, and the
+// object gets Unity's unity_LightmapST: atlasUV = uv1 * (sx, sy) + (ox, oy).
+//
+// Frames: texel (x, y) of a W x H page covers atlas UV [x, x+1]/W x [y, y+1]/H, with (0, 0)
+// the top-left corner = the first image row (glTF texture coordinates, MISSION.md
+// "Conventions"). scaleOffset maps the UV1 bounding rectangle [u0, u1] x [v0, v1] exactly onto
+// the object's texel rectangle [x, x + w] x [y, y + h] (texel edges, no half-texel inset):
+// the rasterizer is conservative, so border texels partly covered still get samples.
+#pragma once
+
+#include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "src/math.h"
+#include "src/result.h"
+#include "src/scene.h"
+
+namespace kiln {
+
+struct AtlasPage {
+  int width = 0, height = 0;  // texels
+};
+
+// One scene object's place in the atlas. Index-aligned with Scene::objects.
+struct AtlasObject {
+  int lightmapIndex = -1;  // page, or -1: no lightmap (not static, scale 0, or probe-lit)
+  glm::ivec2 texelMin{0};  // texel rectangle [min, min + size) in its page
+  glm::ivec2 texelSize{0};
+  vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // (sx, sy, ox, oy)
+  // Texels per world unit the object actually got (below resolution x scale when clamped).
+  float texelsPerUnit = 0.0f;
+};
+
+struct AtlasLayout {
+  std::vector<AtlasPage> pages;
+  std::vector<AtlasObject> objects;   // one per Scene::objects entry
+  std::vector<std::string> warnings;  // e.g. objects scaled down to fit maxSize
+};
+
+struct AtlasSettings {
+  float resolution = 10.0f;  // texels per world unit (before scaleInLightmap)
+  int padding = 2;           // texels kept empty around every object (see packAtlas)
+  int maxSize = 1024;        // largest page width and height, texels
+  // When set, packAtlas checks it against the scene and returns it instead of packing
+  // (--lock-atlas: several lightmap sets of one scene stay interchangeable).
+  std::optional<AtlasLayout> locked;
+};
+
+// Whether an object gets a lightmap: static, scaleInLightmap > 0 and receiveGI = lightmaps
+// (objects lit by probes get none, as in Unity). Others still cast and bounce light.
+bool isLightmapped(const Object& object);
+
+// UV1 bounding rectangle (min, max) of an object's triangles' vertices.
+std::pair<vec2, vec2> uv1Bounds(const Object& object);
+
+// Packs every lightmapped object of the scene. Size rule: an object with world area A, UV1
+// triangle area A_uv (sum of |UV triangle areas|) and UV1 bounding rectangle of extent
+// (eu, ev) gets k = resolution x scaleInLightmap x sqrt(A / A_uv) texels per UV unit, so its
+// triangles cover (resolution x scale)^2 x A texels, and a rectangle of
+// w = ceil(k eu) x h = ceil(k ev) texels (at least 1). When max(w, h) > maxSize - 2 padding,
+// k is scaled down to fit and a warning names the object.
+// Padding: every object keeps `padding` empty texels on each side inside its page (so two
+// objects are at least `padding` texels apart, and at least `padding` from the page border).
+// Pages: objects are sorted by height, then width (descending), then object index, and
+// filled into maxSize pages in that order, a new page when one is full; each page is then
+// shrunk to the smallest power-of-two size (w x w or w x w/2, or maxSize itself when it is not
+// a power of two) that holds its objects in the same order. Deterministic.
+// Errors name the setting (maxSize < 1 + 2 padding, resolution <= 0) or the object (no uv1,
+// zero-area uv1).
+Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);
+
+// The manifest's atlas part: {"lightmaps": [{"index", "width", "height"}], "objects":
+// [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox, oy]}]}. Objects
+// without a lightmap are listed with lightmapIndex -1.
+nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene);
+
+// Reads a layout back from a manifest (the shape above; other keys are ignored) for `scene`:
+// objects are matched by nodeIndex and their node name must agree; every lightmapped scene
+// object needs an entry with a page, and entries with a page must be lightmapped objects.
+// Texel rectangles are recovered from scaleOffset and the objects' UV1 bounds.
+Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scene& scene);
+
+}  // namespace kiln

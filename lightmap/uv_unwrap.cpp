@@ -1,0 +1,744 @@
+// uv_unwrap.cpp: lightmap UV generation: welding, chart growing by normal cone, planar
+// projection or LSCM per chart, minimum-area orientation and skyline packing.
+//
+// LSCM: B. Lévy, S. Petitjean, N. Ray, J. Maillot, "Least Squares Conformal Maps for
+// Automatic Texture Atlas Generation", SIGGRAPH 2002 (the complex per-triangle energy of
+// section 3.3, two pinned vertices, solved here as real least squares through the normal
+// equations with a sparse Cholesky factorization). Stretch metric: P. Sander, J. Snyder,
+// S. Gortler, H. Hoppe, "Texture Mapping Progressive Meshes", SIGGRAPH 2001.
+#include "lightmap/uv_unwrap.h"
+
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <numeric>
+#include <string>
+#include <unordered_map>
+
+#include "lightmap/atlas.h"
+#include "lightmap/skyline_packer.h"
+#include "src/parallel.h"
+
+namespace kiln {
+
+namespace {
+
+using glm::dvec2;
+using glm::dvec3;
+
+double cross2(dvec2 a, dvec2 b) { return a.x * b.y - a.y * b.x; }
+
+// Largest ratio between a triangle's texel density and its chart's that LSCM may leave.
+constexpr double kMaxAreaDistortion = 2.0;
+
+// The object welded by position: what charts grow over.
+struct WeldedMesh {
+  std::vector<dvec3> positions;               // per welded vertex
+  std::vector<std::array<uint32_t, 3>> tris;  // welded vertex indices, per triangle
+  std::vector<dvec3> normals;                 // unit, per triangle (zero when degenerate)
+  std::vector<double> areas;                  // world area, per triangle
+  std::vector<bool> degenerate;
+  std::vector<std::array<int32_t, 3>> neighbours;  // across edge k = (v[k], v[k+1]); -1 none
+};
+
+WeldedMesh weld(const Object& object) {
+  WeldedMesh m;
+  // Exact position equality: glTF exporters duplicate vertices bit-for-bit at seams. The
+  // comparison treats -0 and +0 as equal; positions were checked to be finite.
+  std::map<std::array<float, 3>, uint32_t> ids;
+  std::vector<uint32_t> weldedOf(object.positions.size());
+  for (size_t i = 0; i < object.positions.size(); ++i) {
+    const vec3 p = object.positions[i];
+    auto [it, inserted] = ids.emplace(std::array<float, 3>{p.x, p.y, p.z}, 0u);
+    if (inserted) {
+      it->second = uint32_t(m.positions.size());
+      m.positions.push_back(dvec3(p));
+    }
+    weldedOf[i] = it->second;
+  }
+  Bounds3 bounds;
+  for (const vec3& p : object.positions) bounds.extend(p);
+  const double diagonal = bounds.diagonal();
+
+  const size_t triangleCount = object.triangles.size();
+  m.tris.resize(triangleCount);
+  m.normals.assign(triangleCount, dvec3(0.0));
+  m.areas.assign(triangleCount, 0.0);
+  m.degenerate.assign(triangleCount, false);
+  m.neighbours.assign(triangleCount, {-1, -1, -1});
+  for (size_t t = 0; t < triangleCount; ++t) {
+    const uvec3 tri = object.triangles[t];
+    m.tris[t] = {weldedOf[tri.x], weldedOf[tri.y], weldedOf[tri.z]};
+    const dvec3 p0 = m.positions[m.tris[t][0]], p1 = m.positions[m.tris[t][1]],
+                p2 = m.positions[m.tris[t][2]];
+    const dvec3 c = glm::cross(p1 - p0, p2 - p0);
+    const double area = 0.5 * glm::length(c);
+    const double maxEdge2 = std::max(
+        {glm::dot(p1 - p0, p1 - p0), glm::dot(p2 - p1, p2 - p1), glm::dot(p0 - p2, p0 - p2)});
+    // Degenerate: collinear within float precision, or negligible against the object.
+    const bool degenerate = m.tris[t][0] == m.tris[t][1] || m.tris[t][1] == m.tris[t][2] ||
+                            m.tris[t][0] == m.tris[t][2] || area <= 1e-10 * maxEdge2 ||
+                            area <= 1e-14 * diagonal * diagonal;
+    m.degenerate[t] = degenerate;
+    if (!degenerate) {
+      m.areas[t] = area;
+      m.normals[t] = c / (2.0 * area);
+    }
+  }
+
+  // Edge adjacency: an edge joins two triangles only when exactly two non-degenerate
+  // triangles use it, in opposite directions (consistently oriented manifold edge).
+  struct EdgeUse {
+    uint64_t key;
+    uint32_t triangle;
+    uint32_t corner;
+  };
+  std::vector<EdgeUse> uses;
+  uses.reserve(triangleCount * 3);
+  for (uint32_t t = 0; t < triangleCount; ++t) {
+    if (m.degenerate[t]) continue;
+    for (uint32_t k = 0; k < 3; ++k) {
+      const uint32_t a = m.tris[t][k], b = m.tris[t][(k + 1) % 3];
+      uses.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), t, k});
+    }
+  }
+  std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
+    return x.key != y.key             ? x.key < y.key
+           : x.triangle != y.triangle ? x.triangle < y.triangle
+                                      : x.corner < y.corner;
+  });
+  for (size_t i = 0; i < uses.size();) {
+    size_t j = i;
+    while (j < uses.size() && uses[j].key == uses[i].key) ++j;
+    if (j - i == 2) {
+      const EdgeUse& x = uses[i];
+      const EdgeUse& y = uses[i + 1];
+      const bool opposite = m.tris[x.triangle][x.corner] == m.tris[y.triangle][(y.corner + 1) % 3];
+      if (opposite && x.triangle != y.triangle) {
+        m.neighbours[x.triangle][x.corner] = int32_t(y.triangle);
+        m.neighbours[y.triangle][y.corner] = int32_t(x.triangle);
+      }
+    }
+    i = j;
+  }
+  return m;
+}
+
+// Grows charts over `subset` (ascending triangle indices): breadth-first from the lowest
+// unassigned triangle, taking edge neighbours whose normal is within the angle of the seed's.
+std::vector<std::vector<uint32_t>> growCharts(const WeldedMesh& m,
+                                              const std::vector<uint32_t>& subset,
+                                              double angleDegrees) {
+  const double cosMax = std::cos(angleDegrees * double(kPi) / 180.0);
+  // 0 = not in subset, 1 = free, 2 = taken.
+  std::vector<uint8_t> state(m.tris.size(), 0);
+  for (uint32_t t : subset) state[t] = 1;
+  std::vector<std::vector<uint32_t>> charts;
+  std::deque<uint32_t> queue;
+  for (uint32_t seed : subset) {
+    if (state[seed] != 1) continue;
+    const dvec3 axis = m.normals[seed];
+    std::vector<uint32_t> chart;
+    state[seed] = 2;
+    queue.push_back(seed);
+    while (!queue.empty()) {
+      const uint32_t t = queue.front();
+      queue.pop_front();
+      chart.push_back(t);
+      for (int32_t n : m.neighbours[t]) {
+        if (n < 0 || state[n] != 1) continue;
+        if (glm::dot(m.normals[n], axis) < cosMax) continue;
+        state[n] = 2;
+        queue.push_back(uint32_t(n));
+      }
+    }
+    std::sort(chart.begin(), chart.end());
+    charts.push_back(std::move(chart));
+  }
+  return charts;
+}
+
+// A chart's parameterization: UVs of its welded vertices, in world units.
+struct Chart {
+  std::vector<uint32_t> triangles;  // ascending
+  std::vector<uint32_t> vertices;   // welded indices, ascending
+  std::vector<dvec2> uv;            // per entry of `vertices`
+  bool planar = false;
+
+  uint32_t local(uint32_t welded) const {
+    return uint32_t(std::lower_bound(vertices.begin(), vertices.end(), welded) - vertices.begin());
+  }
+};
+
+Chart makeChart(const WeldedMesh& m, std::vector<uint32_t> triangles) {
+  Chart c;
+  c.triangles = std::move(triangles);
+  for (uint32_t t : c.triangles)
+    for (uint32_t v : m.tris[t]) c.vertices.push_back(v);
+  std::sort(c.vertices.begin(), c.vertices.end());
+  c.vertices.erase(std::unique(c.vertices.begin(), c.vertices.end()), c.vertices.end());
+  c.uv.assign(c.vertices.size(), dvec2(0.0));
+  return c;
+}
+
+dvec3 meanNormal(const WeldedMesh& m, const Chart& c) {
+  dvec3 n(0.0);
+  for (uint32_t t : c.triangles) n += m.areas[t] * m.normals[t];
+  const double len = glm::length(n);
+  return len > 0.0 ? n / len : m.normals[c.triangles.front()];
+}
+
+// Orthogonal projection onto the plane through the origin perpendicular to n: exact (zero
+// stretch) for planar charts. Tangent frame of Duff et al. 2017, in double.
+void projectChart(const WeldedMesh& m, dvec3 n, Chart& c) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z);
+  const double b = n.x * n.y * a;
+  const dvec3 t(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+  const dvec3 bt(b, sign + n.y * n.y * a, -n.y);
+  for (size_t i = 0; i < c.vertices.size(); ++i) {
+    const dvec3 p = m.positions[c.vertices[i]];
+    c.uv[i] = dvec2(glm::dot(p, t), glm::dot(p, bt));
+  }
+}
+
+// Triangle t in its own plane: z0 = 0, z1 on +x, z2 with y > 0 (counter-clockwise).
+std::array<dvec2, 3> localTriangle(const WeldedMesh& m, uint32_t t) {
+  const dvec3 p0 = m.positions[m.tris[t][0]], p1 = m.positions[m.tris[t][1]],
+              p2 = m.positions[m.tris[t][2]];
+  const dvec3 e1 = glm::normalize(p1 - p0);
+  const dvec3 e2 = glm::cross(m.normals[t], e1);
+  return {dvec2(0.0), dvec2(glm::length(p1 - p0), 0.0),
+          dvec2(glm::dot(p2 - p0, e1), glm::dot(p2 - p0, e2))};
+}
+
+// LSCM (Lévy et al. 2002). For triangle T with local coordinates z_j = x_j + i y_j, the
+// conformal energy is |sum_j W_j U_j|^2 / d_T with W_1 = z_3 - z_2, W_2 = z_1 - z_3,
+// W_3 = z_2 - z_1, U_j = u_j + i v_j and d_T = twice the area; the identity map has zero
+// energy, so the solution keeps the surface's orientation. Two vertices far apart along the
+// chart's longest bounding-box axis are pinned at their 3D distance. Returns false when the
+// system cannot be solved or the map folds (a UV triangle with non-positive area).
+bool lscmChart(const WeldedMesh& m, Chart& c) {
+  const size_t n = c.vertices.size();
+  if (n < 3) return false;
+  dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (uint32_t v : c.vertices) {
+    lo = glm::min(lo, m.positions[v]);
+    hi = glm::max(hi, m.positions[v]);
+  }
+  const dvec3 extent = hi - lo;
+  const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : extent.y >= extent.z ? 1 : 2;
+  uint32_t pinA = 0, pinB = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const double x = m.positions[c.vertices[i]][axis];
+    if (x < m.positions[c.vertices[pinA]][axis]) pinA = i;
+    if (x > m.positions[c.vertices[pinB]][axis]) pinB = i;
+  }
+  if (pinA == pinB) return false;
+  const dvec2 pinUv[2] = {
+      dvec2(0.0),
+      dvec2(glm::length(m.positions[c.vertices[pinB]] - m.positions[c.vertices[pinA]]), 0.0)};
+
+  // Unknowns: (u, v) of every vertex but the pins.
+  std::vector<int32_t> unknown(n, -1);
+  int32_t freeCount = 0;
+  for (uint32_t i = 0; i < n; ++i)
+    if (i != pinA && i != pinB) unknown[i] = freeCount++;
+
+  const size_t rows = 2 * c.triangles.size();
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(rows * 6);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(rows));
+  for (size_t k = 0; k < c.triangles.size(); ++k) {
+    const uint32_t t = c.triangles[k];
+    const std::array<dvec2, 3> z = localTriangle(m, t);
+    const double s = 1.0 / std::sqrt(2.0 * m.areas[t]);
+    const dvec2 w[3] = {z[2] - z[1], z[0] - z[2], z[1] - z[0]};
+    const int re = int(2 * k), im = int(2 * k + 1);
+    for (int j = 0; j < 3; ++j) {
+      const double a = s * w[j].x, b = s * w[j].y;
+      const uint32_t v = c.local(m.tris[t][j]);
+      // (a + ib)(u + iv) = (a u - b v) + i (b u + a v)
+      if (unknown[v] >= 0) {
+        const int col = 2 * unknown[v];
+        entries.emplace_back(re, col, a);
+        entries.emplace_back(re, col + 1, -b);
+        entries.emplace_back(im, col, b);
+        entries.emplace_back(im, col + 1, a);
+      } else {
+        const dvec2 p = pinUv[v == pinA ? 0 : 1];
+        rhs[re] -= a * p.x - b * p.y;
+        rhs[im] -= b * p.x + a * p.y;
+      }
+    }
+  }
+  Eigen::SparseMatrix<double> a(Eigen::Index(rows), 2 * freeCount);
+  a.setFromTriplets(entries.begin(), entries.end());
+  const Eigen::SparseMatrix<double> normal = a.transpose() * a;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(normal);
+  if (solver.info() != Eigen::Success) return false;
+  const Eigen::VectorXd x = solver.solve(a.transpose() * rhs);
+  if (solver.info() != Eigen::Success) return false;
+
+  for (uint32_t i = 0; i < n; ++i) {
+    if (i == pinA)
+      c.uv[i] = pinUv[0];
+    else if (i == pinB)
+      c.uv[i] = pinUv[1];
+    else
+      c.uv[i] = dvec2(x[2 * unknown[i]], x[2 * unknown[i] + 1]);
+    if (!std::isfinite(c.uv[i].x) || !std::isfinite(c.uv[i].y)) return false;
+  }
+  for (uint32_t t : c.triangles) {
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    if (!(cross2(u1 - u0, u2 - u0) > 0.0)) return false;
+  }
+  return true;
+}
+
+// Whether two UV triangles' interiors overlap, by the separating axis theorem: in 2D, two
+// convex polygons with disjoint interiors are separated by a line parallel to one of their
+// edges. Touching (shared edges or vertices, within `eps`) is not overlapping.
+bool trianglesOverlap(const std::array<dvec2, 3>& a, const std::array<dvec2, 3>& b, double eps) {
+  for (int pass = 0; pass < 2; ++pass) {
+    const std::array<dvec2, 3>& p = pass == 0 ? a : b;
+    const std::array<dvec2, 3>& q = pass == 0 ? b : a;
+    const double orientation = cross2(p[1] - p[0], p[2] - p[0]) >= 0.0 ? 1.0 : -1.0;
+    for (int e = 0; e < 3; ++e) {
+      const dvec2 edge = p[(e + 1) % 3] - p[e];
+      const double len = glm::length(edge);
+      if (len <= 0.0) continue;
+      // Signed distances of q's corners to p's edge line, positive on p's inner side.
+      double maxInner = -1e300;
+      for (int k = 0; k < 3; ++k)
+        maxInner = std::max(maxInner, orientation * cross2(edge, q[k] - p[e]) / len);
+      if (maxInner <= eps) return false;  // q lies entirely on the outer side of this edge
+    }
+  }
+  return true;
+}
+
+// Whether any two triangles of the chart overlap in UV (LSCM is only locally injective: a
+// chart's boundary can still run over itself). Sweep over x-sorted bounding boxes.
+bool chartOverlaps(const WeldedMesh& m, const Chart& c) {
+  const size_t n = c.triangles.size();
+  std::vector<std::array<dvec2, 3>> uv(n);
+  std::vector<dvec2> lo(n), hi(n);
+  dvec2 cLo(1e300), cHi(-1e300);
+  for (size_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) uv[i][k] = c.uv[c.local(m.tris[c.triangles[i]][k])];
+    lo[i] = glm::min(uv[i][0], glm::min(uv[i][1], uv[i][2]));
+    hi[i] = glm::max(uv[i][0], glm::max(uv[i][1], uv[i][2]));
+    cLo = glm::min(cLo, lo[i]);
+    cHi = glm::max(cHi, hi[i]);
+  }
+  const double eps = 1e-9 * std::max(cHi.x - cLo.x, cHi.y - cLo.y);
+  std::vector<uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(),
+            [&](uint32_t a, uint32_t b) { return lo[a].x != lo[b].x ? lo[a].x < lo[b].x : a < b; });
+  for (size_t i = 0; i < n; ++i)
+    for (size_t j = i + 1; j < n && lo[order[j]].x < hi[order[i]].x - eps; ++j) {
+      const uint32_t a = order[i], b = order[j];
+      if (lo[b].y >= hi[a].y - eps || lo[a].y >= hi[b].y - eps) continue;
+      if (trianglesOverlap(uv[a], uv[b], eps)) return true;
+    }
+  return false;
+}
+
+// Smallest cosine between a triangle normal of the chart and the chart's mean normal.
+double coneCos(const WeldedMesh& m, const Chart& c, dvec3 mean) {
+  double minCos = 1.0;
+  for (uint32_t t : c.triangles) minCos = std::min(minCos, glm::dot(m.normals[t], mean));
+  return minCos;
+}
+
+// Planar projection when the chart is flat, LSCM otherwise. False when the map folds or
+// overlaps itself.
+bool parameterizeChart(const WeldedMesh& m, const UnwrapSettings& settings, Chart& c) {
+  const double planarCos = std::cos(double(settings.planarAngleDegrees) * double(kPi) / 180.0);
+  const dvec3 n = meanNormal(m, c);
+  if (coneCos(m, c, n) >= planarCos) {
+    projectChart(m, n, c);
+    c.planar = true;
+  } else {
+    c.planar = false;
+    if (!lscmChart(m, c)) return false;
+    // LSCM is conformal but not area-preserving: reject charts whose texel density would vary
+    // by more than 2x (measured on 45-degree cones: at most 1.13), so they get split.
+    double uvSum = 0.0, worldSum = 0.0;
+    std::vector<double> uvArea(c.triangles.size());
+    for (size_t i = 0; i < c.triangles.size(); ++i) {
+      const uint32_t t = c.triangles[i];
+      const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                  u2 = c.uv[c.local(m.tris[t][2])];
+      uvArea[i] = 0.5 * cross2(u1 - u0, u2 - u0);
+      uvSum += uvArea[i];
+      worldSum += m.areas[t];
+    }
+    for (size_t i = 0; i < c.triangles.size(); ++i) {
+      const double ratio = (uvArea[i] / m.areas[c.triangles[i]]) * (worldSum / uvSum);
+      if (!(ratio <= kMaxAreaDistortion && ratio >= 1.0 / kMaxAreaDistortion)) return false;
+    }
+  }
+  return !chartOverlaps(m, c);
+}
+
+// Parameterizes `subset` and appends the resulting charts: one per grown chart when it works,
+// several when LSCM folds and the region is regrown with half the cone angle.
+void buildCharts(const WeldedMesh& m, const std::vector<uint32_t>& subset, double angle,
+                 const UnwrapSettings& settings, std::vector<Chart>& out) {
+  for (std::vector<uint32_t>& group : growCharts(m, subset, angle)) {
+    Chart c = makeChart(m, std::move(group));
+    if (parameterizeChart(m, settings, c)) {
+      out.push_back(std::move(c));
+    } else if (angle / 2.0 >= 2.0) {
+      buildCharts(m, c.triangles, angle / 2.0, settings, out);
+    } else {
+      // Still overlapping with normals within 2 degrees (coplanar overlapping geometry):
+      // one chart per triangle, each projected onto its own plane, cannot overlap.
+      for (uint32_t t : c.triangles) {
+        Chart single = makeChart(m, {t});
+        projectChart(m, m.normals[t], single);
+        single.planar = true;
+        out.push_back(std::move(single));
+      }
+    }
+  }
+}
+
+// Greedy growth from the lowest free triangle leaves short charts along the borders of long
+// ones (a 24-sided cylinder gets 6 charts where 4 would do). Merge each chart, smallest world
+// area first, into the neighbour it shares the most edges with, when every normal of the
+// union stays within the cone angle of the union's mean normal and the union parameterizes
+// without a fold. A few passes; deterministic (ties by chart index).
+void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vector<Chart>& charts) {
+  const double cosMax = std::cos(double(settings.maxChartAngleDegrees) * double(kPi) / 180.0);
+  std::vector<int32_t> chartOf(m.tris.size(), -1);
+  std::vector<double> area(charts.size(), 0.0);
+  for (uint32_t i = 0; i < charts.size(); ++i)
+    for (uint32_t t : charts[i].triangles) {
+      chartOf[t] = int32_t(i);
+      area[i] += m.areas[t];
+    }
+  std::vector<bool> alive(charts.size(), true);
+  for (int pass = 0; pass < 4; ++pass) {
+    std::vector<uint32_t> order;
+    for (uint32_t i = 0; i < charts.size(); ++i)
+      if (alive[i]) order.push_back(i);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      return area[a] != area[b] ? area[a] < area[b] : a < b;
+    });
+    bool mergedAny = false;
+    for (uint32_t c : order) {
+      if (!alive[c]) continue;
+      std::map<uint32_t, int> shared;
+      for (uint32_t t : charts[c].triangles)
+        for (int32_t nb : m.neighbours[t])
+          if (nb >= 0 && chartOf[nb] >= 0 && chartOf[nb] != int32_t(c))
+            ++shared[uint32_t(chartOf[nb])];
+      std::vector<std::pair<int, uint32_t>> candidates;  // (-shared edges, chart)
+      for (auto [chart, count] : shared) candidates.emplace_back(-count, chart);
+      std::sort(candidates.begin(), candidates.end());
+      for (auto [negCount, other] : candidates) {
+        std::vector<uint32_t> tris = charts[other].triangles;
+        tris.insert(tris.end(), charts[c].triangles.begin(), charts[c].triangles.end());
+        std::sort(tris.begin(), tris.end());
+        Chart merged = makeChart(m, std::move(tris));
+        // Strictly inside the cone: two equal perpendicular faces (a box's) are exactly 45
+        // degrees from their mean normal and must stay apart.
+        if (coneCos(m, merged, meanNormal(m, merged)) < cosMax + 1e-6) continue;
+        if (!parameterizeChart(m, settings, merged)) continue;
+        for (uint32_t t : charts[c].triangles) chartOf[t] = int32_t(other);
+        charts[other] = std::move(merged);
+        area[other] += area[c];
+        alive[c] = false;
+        charts[c] = Chart();
+        mergedAny = true;
+        break;
+      }
+    }
+    if (!mergedAny) break;
+  }
+  std::vector<Chart> kept;
+  for (uint32_t i = 0; i < charts.size(); ++i)
+    if (alive[i]) kept.push_back(std::move(charts[i]));
+  charts = std::move(kept);
+}
+
+// Andrew's monotone chain convex hull, counter-clockwise, without collinear points.
+std::vector<dvec2> convexHull(std::vector<dvec2> p) {
+  std::sort(p.begin(), p.end(),
+            [](dvec2 a, dvec2 b) { return a.x != b.x ? a.x < b.x : a.y < b.y; });
+  if (p.size() < 3) return p;
+  std::vector<dvec2> h(2 * p.size());
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross2(h[k - 1] - h[k - 2], p[i] - h[k - 2]) <= 0.0) --k;
+    h[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, lower = k + 1; i-- > 0;) {
+    while (k >= lower && cross2(h[k - 1] - h[k - 2], p[i] - h[k - 2]) <= 0.0) --k;
+    h[k++] = p[i];
+  }
+  h.resize(k - 1);
+  return h;
+}
+
+// Scales the chart to its world area, rotates it to its minimum-area bounding rectangle
+// (an edge of the optimal rectangle lies on a hull edge: Freeman and Shapira 1975) with the
+// long side along u, and moves its minimum corner to the origin. Returns the extent.
+dvec2 normalizeChart(const WeldedMesh& m, Chart& c) {
+  double worldArea = 0.0, uvArea = 0.0;
+  for (uint32_t t : c.triangles) {
+    worldArea += m.areas[t];
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    uvArea += 0.5 * cross2(u1 - u0, u2 - u0);
+  }
+  const double scale = uvArea > 0.0 ? std::sqrt(worldArea / uvArea) : 1.0;
+  for (dvec2& uv : c.uv) uv *= scale;
+
+  const std::vector<dvec2> hull = convexHull(c.uv);
+  dvec2 bestAxis(1.0, 0.0);
+  double bestArea = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < hull.size(); ++i) {
+    const dvec2 e = hull[(i + 1) % hull.size()] - hull[i];
+    const double len = glm::length(e);
+    if (len <= 0.0) continue;
+    const dvec2 axis = e / len, perp(-axis.y, axis.x);
+    double minU = 1e300, maxU = -1e300, minV = 1e300, maxV = -1e300;
+    for (dvec2 p : hull) {
+      minU = std::min(minU, glm::dot(p, axis));
+      maxU = std::max(maxU, glm::dot(p, axis));
+      minV = std::min(minV, glm::dot(p, perp));
+      maxV = std::max(maxV, glm::dot(p, perp));
+    }
+    // Relative tolerance so that near-ties (a square's four edges) keep the first edge.
+    const double area = (maxU - minU) * (maxV - minV);
+    if (area < bestArea * (1.0 - 1e-9)) {
+      bestArea = area;
+      bestAxis = axis;
+    }
+  }
+  // A rotation (determinant +1), so orientation is kept.
+  dvec2 axis = bestAxis, perp(-bestAxis.y, bestAxis.x);
+  dvec2 lo(1e300), hi(-1e300);
+  for (dvec2& uv : c.uv) {
+    uv = dvec2(glm::dot(uv, axis), glm::dot(uv, perp));
+    lo = glm::min(lo, uv);
+    hi = glm::max(hi, uv);
+  }
+  if (hi.y - lo.y > hi.x - lo.x) {  // quarter turn (u, v) -> (v, -u): long side along u
+    for (dvec2& uv : c.uv) uv = dvec2(uv.y, -uv.x);
+    const dvec2 oldLo = lo, oldHi = hi;
+    lo = dvec2(oldLo.y, -oldHi.x);
+    hi = dvec2(oldHi.y, -oldLo.x);
+  }
+  for (dvec2& uv : c.uv) uv -= lo;
+  return hi - lo;
+}
+
+int texelsUp(double x) {
+  // Round up to whole texels, tolerating float noise on exact multiples.
+  return std::max(1, int(std::ceil(x - 1e-6)));
+}
+
+}  // namespace
+
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings) {
+  const std::string who = "object '" + object.name + "'";
+  if (!(settings.texelsPerUnit > 0.0f) || !std::isfinite(settings.texelsPerUnit))
+    return Error{who + ": unwrap texelsPerUnit must be > 0 (got " +
+                 std::to_string(settings.texelsPerUnit) + ")"};
+  if (settings.gutterTexels < 0) return Error{who + ": unwrap gutterTexels must be >= 0"};
+  if (!(settings.maxChartAngleDegrees > 0.0f && settings.maxChartAngleDegrees < 90.0f))
+    return Error{who + ": unwrap maxChartAngleDegrees must be in (0, 90)"};
+  if (object.triangles.empty()) return Error{who + ": has no triangles to unwrap"};
+  for (const vec3& p : object.positions)
+    if (!isFinite(p)) return Error{who + ": has a non-finite vertex position"};
+  for (size_t t = 0; t < object.triangles.size(); ++t) {
+    const uvec3 tri = object.triangles[t];
+    if (std::max({tri.x, tri.y, tri.z}) >= object.positions.size())
+      return Error{who + ": triangles[" + std::to_string(t) + "] has a vertex index out of range"};
+  }
+
+  const WeldedMesh m = weld(object);
+  std::vector<uint32_t> good, degenerate;
+  for (uint32_t t = 0; t < m.tris.size(); ++t) (m.degenerate[t] ? degenerate : good).push_back(t);
+
+  std::vector<Chart> charts;
+  buildCharts(m, good, settings.maxChartAngleDegrees, settings, charts);
+  mergeCharts(m, settings, charts);
+
+  // Charts in texels at the expected density, packed with the gutter between them.
+  const double d = settings.texelsPerUnit;
+  const int gutter = settings.gutterTexels;
+  std::vector<dvec2> extents(charts.size());
+  std::vector<glm::ivec2> items(charts.size());
+  double itemArea = 0.0;
+  int minSide = 1;
+  for (size_t i = 0; i < charts.size(); ++i) {
+    extents[i] = normalizeChart(m, charts[i]);
+    items[i] = glm::ivec2(texelsUp(extents[i].x * d) + gutter, texelsUp(extents[i].y * d) + gutter);
+    itemArea += double(items[i].x) * items[i].y;
+    minSide = std::max({minSide, items[i].x, items[i].y});
+  }
+  const std::vector<uint32_t> order = packingOrder(items);
+  std::vector<glm::ivec2> placed(charts.size());
+  int side = std::max(minSide, int(std::ceil(std::sqrt(itemArea))));
+  for (;;) {
+    SkylinePacker packer(side, side);
+    bool fits = true;
+    for (uint32_t i : order) {
+      const auto at = packer.insert(items[i].x, items[i].y);
+      if (!at) {
+        fits = false;
+        break;
+      }
+      placed[i] = *at;
+    }
+    if (fits) break;
+    side += std::max(1, side / 16);
+  }
+
+  // Texel positions, then one uniform scale into [0, 1]^2 (the longer extent becomes 1).
+  double extent = 0.0;
+  for (size_t i = 0; i < charts.size(); ++i) {
+    extent = std::max(extent, placed[i].x + extents[i].x * d);
+    extent = std::max(extent, placed[i].y + extents[i].y * d);
+  }
+  if (!(extent > 0.0)) extent = 1.0;
+  const double uvPerTexel = 1.0 / extent;
+
+  UnwrapResult r;
+  r.worldPerUv = extent / d;
+  r.triangleChart.assign(m.tris.size(), 0);
+  for (uint32_t i = 0; i < charts.size(); ++i)
+    for (uint32_t t : charts[i].triangles) r.triangleChart[t] = i;
+  for (size_t k = 0; k < degenerate.size(); ++k)
+    r.triangleChart[degenerate[k]] = uint32_t(charts.size() + k);
+
+  // New vertices: one per (original vertex, chart), numbered in order of first use.
+  std::unordered_map<uint64_t, uint32_t> newIndex;
+  r.triangles.resize(m.tris.size());
+  for (uint32_t t = 0; t < m.tris.size(); ++t) {
+    const uint32_t chart = r.triangleChart[t];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t original = object.triangles[t][k];
+      const uint64_t key = (uint64_t(chart) << 32) | original;
+      auto [it, inserted] = newIndex.emplace(key, uint32_t(r.vertexRemap.size()));
+      if (inserted) {
+        r.vertexRemap.push_back(original);
+        dvec2 uv(0.0);  // degenerate triangles collapse to the origin: no area, no texels
+        if (chart < charts.size()) {
+          const Chart& c = charts[chart];
+          uv = (dvec2(placed[chart]) + c.uv[c.local(m.tris[t][k])] * d) * uvPerTexel;
+        }
+        r.uv1.push_back(vec2(uv));
+      }
+      r.triangles[t][k] = it->second;
+    }
+  }
+
+  // Statistics, measured on the float output.
+  UnwrapStats& s = r.stats;
+  s.chartCount = int(charts.size());
+  s.degenerateTriangles = int(degenerate.size());
+  for (const Chart& c : charts) s.planarCharts += c.planar ? 1 : 0;
+  double sumArea = 0.0, sumStretch = 0.0, uvAreaSum = 0.0;
+  dvec2 uvMax(0.0);
+  for (const vec2& uv : r.uv1) uvMax = glm::max(uvMax, dvec2(uv));
+  for (uint32_t t : good) {
+    const std::array<dvec2, 3> z = localTriangle(m, t);
+    const dvec2 u0 = dvec2(r.uv1[r.triangles[t][0]]) * r.worldPerUv,
+                u1 = dvec2(r.uv1[r.triangles[t][1]]) * r.worldPerUv,
+                u2 = dvec2(r.uv1[r.triangles[t][2]]) * r.worldPerUv;
+    const double uvArea = 0.5 * cross2(u1 - u0, u2 - u0);
+    uvAreaSum += uvArea / (r.worldPerUv * r.worldPerUv);
+    if (!(uvArea > 0.0)) {
+      ++s.flippedTriangles;
+      continue;
+    }
+    // Jacobian J = [u1-u0 u2-u0] [z1-z0 z2-z0]^-1 of the map from the surface to UV.
+    const glm::dmat2 q(z[1] - z[0], z[2] - z[0]);
+    const glm::dmat2 u(u1 - u0, u2 - u0);
+    const glm::dmat2 j = u * glm::inverse(q);
+    const double e = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
+    const double det = std::abs(glm::determinant(j));
+    const double s1 = std::sqrt(0.5 * (e + std::sqrt(std::max(0.0, e * e - 4.0 * det * det))));
+    const double s2 = det / s1;
+    sumArea += m.areas[t];
+    sumStretch += m.areas[t] * 0.5 * (s1 * s1 + s2 * s2);
+    s.maxAnisotropy = std::max(s.maxAnisotropy, s1 / s2);
+    s.maxAreaDistortion = std::max({s.maxAreaDistortion, det, 1.0 / det});
+  }
+  s.l2Stretch = sumArea > 0.0 ? std::sqrt(sumStretch / sumArea) : 1.0;
+  s.packingEfficiency = uvMax.x * uvMax.y > 0.0 ? uvAreaSum / (uvMax.x * uvMax.y) : 0.0;
+  return r;
+}
+
+Object applyUnwrap(const Object& object, const UnwrapResult& unwrap) {
+  Object o;
+  o.name = object.name;
+  o.nodeIndex = object.nodeIndex;
+  o.meshIndex = object.meshIndex;
+  o.settings = object.settings;
+  o.triangleMaterial = object.triangleMaterial;
+  const size_t n = unwrap.vertexRemap.size();
+  o.positions.resize(n);
+  if (object.normals.size() == object.positions.size()) o.normals.resize(n);
+  if (object.uv0.size() == object.positions.size()) o.uv0.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t v = unwrap.vertexRemap[i];
+    o.positions[i] = object.positions[v];
+    if (!o.normals.empty()) o.normals[i] = object.normals[v];
+    if (!o.uv0.empty()) o.uv0[i] = object.uv0[v];
+  }
+  o.uv1 = unwrap.uv1;
+  o.triangles = unwrap.triangles;
+  return o;
+}
+
+Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
+    Scene& scene, float resolution, const UnwrapSettings& settings) {
+  if (!(resolution > 0.0f) || !std::isfinite(resolution))
+    return Error{"lightmap resolution must be > 0 texels per unit (got " +
+                 std::to_string(resolution) + ")"};
+  const size_t n = scene.objects.size();
+  std::vector<std::optional<UnwrapResult>> unwraps(n);
+  std::vector<std::string> errors(n);
+  auto needs = [&](const Object& o) {
+    return isLightmapped(o) && o.uv1.size() != o.positions.size();
+  };
+  ParallelOptions options;
+  options.grain = 1;  // objects differ wildly in size
+  parallelFor(
+      n,
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          const Object& o = scene.objects[i];
+          if (!needs(o)) continue;
+          UnwrapSettings s = settings;
+          s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
+          Result<UnwrapResult> r = generateLightmapUvs(o, s);
+          if (r.ok())
+            unwraps[i] = std::move(*r);
+          else
+            errors[i] = r.error();
+        }
+      },
+      options);
+  for (size_t i = 0; i < n; ++i)
+    if (!errors[i].empty()) return Error{errors[i]};
+  for (size_t i = 0; i < n; ++i)
+    if (unwraps[i]) scene.objects[i] = applyUnwrap(scene.objects[i], *unwraps[i]);
+  return unwraps;
+}
+
+}  // namespace kiln

@@ -1,0 +1,91 @@
+// uv_unwrap.h: lightmap UV generation for an object without TEXCOORD_1 (MISSION.md
+// "Lightmaps": charts, parameterize, pack).
+//
+// Pipeline: weld vertices by position (glTF splits vertices at normal and UV seams), grow
+// charts over edge connectivity while every triangle normal stays within a cone around the
+// chart's seed normal, parameterize each chart (planar charts: orthogonal projection, zero
+// stretch; curved charts: least squares conformal maps, Lévy et al. 2002), scale every chart
+// so that its UV area equals its world area, orient it by its minimum-area bounding
+// rectangle, and pack the charts (skyline, Jylänki 2010) with a gutter measured in texels at
+// the object's expected texel density. The result is uniform: one world unit is the same UV
+// length in every chart (`worldPerUv`). Guarantees: no flipped and no overlapping UV
+// triangles (every chart is checked; failures are split until they pass).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "src/result.h"
+#include "src/scene.h"
+
+namespace kiln {
+
+struct UnwrapSettings {
+  // Expected texel density in texels per world unit: the bake's resolution x the object's
+  // scaleInLightmap. Sets the gutter's size in UV and rounds charts up to whole texels.
+  float texelsPerUnit = 10.0f;
+  // Empty texels between charts, so that bilinear filtering and dilation of one chart never
+  // reach another.
+  int gutterTexels = 2;
+  // A chart takes a triangle when its normal is within this angle of the chart's seed
+  // normal; small charts are then merged into neighbours while every normal of the union
+  // stays within this angle of the union's mean normal. 45 degrees: a box's faces (90
+  // degrees apart) always get charts of their own, and a 90-degree cone keeps LSCM's area
+  // distortion low (measured: max 1.13 on spheres, 18 charts for a UV sphere) while a
+  // cylinder needs 4 to 5 charts. Charts that LSCM maps with a fold or an overlap are regrown
+  // with half the angle (down to 2 degrees, then one chart per triangle).
+  float maxChartAngleDegrees = 45.0f;
+  // Charts whose normals all lie within this angle of their mean normal are projected onto
+  // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
+  float planarAngleDegrees = 1.0f;
+};
+
+// Distortion and packing statistics of an unwrap.
+struct UnwrapStats {
+  int chartCount = 0;           // charts with area (degenerate triangles are not counted)
+  int planarCharts = 0;         // of which projected rather than solved with LSCM
+  int degenerateTriangles = 0;  // zero-area triangles, mapped to a point of UV space
+  int flippedTriangles = 0;     // UV triangles with non-positive signed area (should be 0)
+  // Area-weighted L2 stretch (Sander et al. 2001) of the map surface -> UV in world units:
+  // sqrt(sum A (s1^2 + s2^2) / 2 / sum A), where s1 >= s2 are the Jacobian's singular values.
+  // 1 when every chart is an isometry.
+  double l2Stretch = 1.0;
+  double maxAnisotropy = 1.0;      // max s1 / s2 over triangles (1 = conformal)
+  double maxAreaDistortion = 1.0;  // max over triangles of max(s1 s2, 1 / (s1 s2))
+  // Sum of UV triangle areas / area of the UV bounding rectangle.
+  double packingEfficiency = 0.0;
+};
+
+// New vertex arrays for an object: vertices split where charts meet. Triangle i of the result
+// is triangle i of the input (same order, so triangleMaterial stays valid).
+struct UnwrapResult {
+  std::vector<uint32_t> vertexRemap;    // new vertex -> the object's original vertex index
+  std::vector<uvec3> triangles;         // indices into the new vertices
+  std::vector<vec2> uv1;                // per new vertex, in [0, 1]^2; max(extent) == 1
+  std::vector<uint32_t> triangleChart;  // per triangle, chart index (degenerate: own index)
+  // World units per UV unit, the same everywhere: a UV length l is l x worldPerUv metres.
+  double worldPerUv = 1.0;
+  UnwrapStats stats;
+};
+
+// Generates lightmap UVs for `object` (world-space positions; normals, uv0 and uv1 are not
+// read). Deterministic: the same object and settings give bit-identical output. Thread-safe
+// (no shared state). Errors name the object: no triangles, an index out of range, or a
+// settings value out of range.
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings);
+
+// The object rebuilt on the unwrap's vertices: positions, normals and uv0 gathered through
+// vertexRemap, triangles and uv1 from the result; name, material and settings kept.
+Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
+
+// For the bake: generates UVs for every lightmapped object (atlas.h isLightmapped) of the
+// scene that has no TEXCOORD_1, at texelsPerUnit = resolution x its scaleInLightmap (the
+// other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,
+// per scene object, its unwrap (nullopt: kept its own UVs, or not lightmapped) so that the
+// output glTF writer can rebuild the primitives. Objects run in parallel; deterministic.
+// Errors name the object.
+Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
+    Scene& scene, float resolution, const UnwrapSettings& settings = {});
+
+}  // namespace kiln

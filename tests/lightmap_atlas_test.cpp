@@ -1,0 +1,244 @@
+// lightmap_atlas_test.cpp: atlas packing: the texel density rule, padding, pages,
+// determinism, errors, and the manifest round trip used by --lock-atlas.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "lightmap/atlas.h"
+#include "tests/test_util.h"
+
+namespace kiln {
+namespace {
+
+// A horizontal w x d quad at height y (UV1 = unit square).
+uint32_t addFloor(Scene& scene, const std::string& name, float w, float d, float y = 0.0f) {
+  return test::addQuad(scene, name, vec3(0, y, 0), vec3(w, y, 0), vec3(w, y, -d), vec3(0, y, -d),
+                       0);
+}
+
+// Many quads of assorted sizes (deterministic).
+Scene assortedScene(int count) {
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  for (int i = 0; i < count; ++i) {
+    const float w = 0.3f + 0.17f * float((i * 7) % 11), d = 0.2f + 0.23f * float((i * 5) % 7);
+    addFloor(scene, "quad" + std::to_string(i), w, d, float(i));
+  }
+  return scene;
+}
+
+// Checks the layout's geometry: rectangles inside their pages with `padding` to the border,
+// and at least `padding` texels between any two objects of a page.
+void expectValidLayout(const Scene& scene, const AtlasLayout& layout, int padding, int maxSize) {
+  ASSERT_EQ(layout.objects.size(), scene.objects.size());
+  for (const AtlasPage& page : layout.pages) {
+    EXPECT_LE(page.width, maxSize);
+    EXPECT_LE(page.height, maxSize);
+  }
+  for (size_t i = 0; i < layout.objects.size(); ++i) {
+    const AtlasObject& a = layout.objects[i];
+    if (a.lightmapIndex < 0) continue;
+    ASSERT_LT(a.lightmapIndex, int(layout.pages.size()));
+    const AtlasPage page = layout.pages[size_t(a.lightmapIndex)];
+    EXPECT_GE(a.texelMin.x, padding);
+    EXPECT_GE(a.texelMin.y, padding);
+    EXPECT_LE(a.texelMin.x + a.texelSize.x, page.width - padding);
+    EXPECT_LE(a.texelMin.y + a.texelSize.y, page.height - padding);
+    for (size_t j = i + 1; j < layout.objects.size(); ++j) {
+      const AtlasObject& b = layout.objects[j];
+      if (b.lightmapIndex != a.lightmapIndex) continue;
+      const int gapX = std::max(b.texelMin.x - (a.texelMin.x + a.texelSize.x),
+                                a.texelMin.x - (b.texelMin.x + b.texelSize.x));
+      const int gapY = std::max(b.texelMin.y - (a.texelMin.y + a.texelSize.y),
+                                a.texelMin.y - (b.texelMin.y + b.texelSize.y));
+      EXPECT_GE(std::max(gapX, gapY), padding) << "objects " << i << " and " << j;
+    }
+    // scaleOffset maps the UV1 bounding rectangle exactly onto the texel rectangle.
+    const auto [lo, hi] = uv1Bounds(scene.objects[i]);
+    const vec2 s(a.scaleOffset.x, a.scaleOffset.y), o(a.scaleOffset.z, a.scaleOffset.w);
+    const vec2 dims(float(page.width), float(page.height));
+    const vec2 p0 = (lo * s + o) * dims, p1 = (hi * s + o) * dims;
+    EXPECT_NEAR(p0.x, float(a.texelMin.x), 1e-3f);
+    EXPECT_NEAR(p0.y, float(a.texelMin.y), 1e-3f);
+    EXPECT_NEAR(p1.x, float(a.texelMin.x + a.texelSize.x), 1e-3f);
+    EXPECT_NEAR(p1.y, float(a.texelMin.y + a.texelSize.y), 1e-3f);
+  }
+}
+
+TEST(LightmapAtlas, TexelCountFollowsResolutionTimesScaleSquaredTimesArea) {
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "two", 2.0f, 2.0f);         // area 4, UV area 1: 20 x 20 at 10 texels/unit
+  addFloor(scene, "long", 3.0f, 1.0f, 1.0f);  // area 3: k = 10 sqrt(3) = 17.32 -> 18 x 18
+  const uint32_t doubled = addFloor(scene, "doubled", 2.0f, 2.0f, 2.0f);
+  scene.objects[doubled].settings.scaleInLightmap = 2.0f;
+  AtlasSettings settings;
+  settings.resolution = 10.0f;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_EQ(layout->objects[0].texelSize, glm::ivec2(20, 20));
+  EXPECT_EQ(layout->objects[1].texelSize, glm::ivec2(18, 18));
+  // scaleInLightmap 2 doubles the density: four times the texels.
+  EXPECT_EQ(layout->objects[2].texelSize, glm::ivec2(40, 40));
+  EXPECT_EQ(layout->objects[2].texelSize.x * layout->objects[2].texelSize.y,
+            4 * layout->objects[0].texelSize.x * layout->objects[0].texelSize.y);
+  EXPECT_FLOAT_EQ(layout->objects[0].texelsPerUnit, 10.0f);
+  EXPECT_FLOAT_EQ(layout->objects[2].texelsPerUnit, 20.0f);
+  ASSERT_EQ(layout->pages.size(), 1u);
+  // Items of w + padding (42, 22, 20) in a bin of page - padding: 42 + 22 > 62, so not
+  // 64 x 64; the next power-of-two candidate by area is 128 x 64.
+  EXPECT_EQ(layout->pages[0].width, 128);
+  EXPECT_EQ(layout->pages[0].height, 64);
+  expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+}
+
+TEST(LightmapAtlas, NotLightmappedObjectsGetNoPage) {
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "lit", 1, 1);
+  const uint32_t zero = addFloor(scene, "scale0", 1, 1, 1);
+  scene.objects[zero].settings.scaleInLightmap = 0.0f;
+  const uint32_t dyn = addFloor(scene, "dynamic", 1, 1, 2);
+  scene.objects[dyn].settings.isStatic = false;
+  const uint32_t probe = addFloor(scene, "probeLit", 1, 1, 3);
+  scene.objects[probe].settings.receiveGI = ReceiveGI::Probes;
+  scene.objects[probe].uv1.clear();  // not needed when not lightmapped
+  const auto layout = packAtlas(scene, AtlasSettings{});
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_EQ(layout->objects[0].lightmapIndex, 0);
+  EXPECT_EQ(layout->objects[zero].lightmapIndex, -1);
+  EXPECT_EQ(layout->objects[dyn].lightmapIndex, -1);
+  EXPECT_EQ(layout->objects[probe].lightmapIndex, -1);
+}
+
+TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {
+  const Scene scene = assortedScene(60);
+  AtlasSettings settings;
+  settings.resolution = 16.0f;
+  settings.padding = 3;
+  const auto a = packAtlas(scene, settings);
+  const auto b = packAtlas(scene, settings);
+  ASSERT_TRUE(a.ok() && b.ok());
+  expectValidLayout(scene, *a, settings.padding, settings.maxSize);
+  ASSERT_EQ(a->pages.size(), 1u);
+  long used = 0;
+  for (size_t i = 0; i < a->objects.size(); ++i) {
+    EXPECT_EQ(a->objects[i].texelMin, b->objects[i].texelMin);
+    EXPECT_EQ(a->objects[i].scaleOffset, b->objects[i].scaleOffset);
+    used += long(a->objects[i].texelSize.x) * a->objects[i].texelSize.y;
+  }
+  const double efficiency = double(used) / (double(a->pages[0].width) * a->pages[0].height);
+  std::printf("60 quads: page %d x %d, %.1f%% of texels inside object rectangles\n",
+              a->pages[0].width, a->pages[0].height, 100.0 * efficiency);
+}
+
+TEST(LightmapAtlas, SmallMaxSizeGivesSeveralPages) {
+  const Scene scene = assortedScene(40);
+  AtlasSettings settings;
+  settings.resolution = 16.0f;
+  settings.maxSize = 64;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_GT(layout->pages.size(), 1u);
+  for (const AtlasPage& p : layout->pages) {
+    EXPECT_EQ(p.width & (p.width - 1), 0) << p.width;  // powers of two
+    EXPECT_EQ(p.height & (p.height - 1), 0) << p.height;
+  }
+  expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+  for (const AtlasObject& o : layout->objects) EXPECT_GE(o.lightmapIndex, 0);
+  std::printf("40 quads at maxSize 64: %zu pages\n", layout->pages.size());
+}
+
+TEST(LightmapAtlas, OversizedObjectIsScaledDownWithAWarning) {
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "Huge", 100.0f, 50.0f);
+  AtlasSettings settings;
+  settings.maxSize = 128;
+  settings.padding = 2;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_EQ(layout->objects[0].texelSize, glm::ivec2(124, 124));
+  ASSERT_EQ(layout->warnings.size(), 1u);
+  EXPECT_NE(layout->warnings[0].find("Huge"), std::string::npos);
+  expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+}
+
+TEST(LightmapAtlas, ImpossibleSettingsAreClearErrors) {
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "floor", 1, 1);
+  AtlasSettings settings;
+  settings.padding = 4;
+  settings.maxSize = 8;  // < 1 + 2 x 4
+  const auto r = packAtlas(scene, settings);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().find("maxSize 8"), std::string::npos) << r.error();
+  EXPECT_NE(r.error().find("padding 4"), std::string::npos) << r.error();
+  settings.maxSize = 9;  // exactly one texel fits
+  const auto ok = packAtlas(scene, settings);
+  ASSERT_TRUE(ok.ok()) << ok.error();
+  EXPECT_EQ(ok->objects[0].texelSize, glm::ivec2(1, 1));
+
+  scene.objects[0].uv1.clear();
+  const auto noUv = packAtlas(scene, AtlasSettings{});
+  ASSERT_FALSE(noUv.ok());
+  EXPECT_NE(noUv.error().find("'floor'"), std::string::npos) << noUv.error();
+}
+
+TEST(LightmapAtlas, LockedLayoutRoundTripsThroughTheManifest) {
+  Scene scene = assortedScene(12);
+  scene.objects[3].settings.scaleInLightmap = 0.0f;
+  AtlasSettings settings;
+  settings.maxSize = 128;
+  settings.resolution = 20.0f;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  // Through text, as a manifest file would go.
+  const nlohmann::json manifest = nlohmann::json::parse(atlasToJson(*layout, scene).dump());
+  const auto back = atlasFromManifest(manifest, scene);
+  ASSERT_TRUE(back.ok()) << back.error();
+  ASSERT_EQ(back->pages.size(), layout->pages.size());
+  for (size_t p = 0; p < layout->pages.size(); ++p) {
+    EXPECT_EQ(back->pages[p].width, layout->pages[p].width);
+    EXPECT_EQ(back->pages[p].height, layout->pages[p].height);
+  }
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    EXPECT_EQ(back->objects[i].lightmapIndex, layout->objects[i].lightmapIndex);
+    EXPECT_EQ(back->objects[i].scaleOffset, layout->objects[i].scaleOffset);
+    if (layout->objects[i].lightmapIndex < 0) continue;
+    EXPECT_EQ(back->objects[i].texelMin, layout->objects[i].texelMin);
+    EXPECT_EQ(back->objects[i].texelSize, layout->objects[i].texelSize);
+  }
+  // packAtlas with the lock returns it, whatever the other settings say.
+  AtlasSettings locked;
+  locked.resolution = 1.0f;
+  locked.locked = *back;
+  const auto again = packAtlas(scene, locked);
+  ASSERT_TRUE(again.ok()) << again.error();
+  EXPECT_EQ(again->objects[5].scaleOffset, layout->objects[5].scaleOffset);
+
+  // Mismatches are named.
+  Scene renamed = scene;
+  renamed.objects[2].name = "renamed";
+  const auto r1 = atlasFromManifest(manifest, renamed);
+  ASSERT_FALSE(r1.ok());
+  EXPECT_NE(r1.error().find("'quad2' in the manifest but 'renamed'"), std::string::npos)
+      << r1.error();
+  Scene nowLit = scene;
+  nowLit.objects[3].settings.scaleInLightmap = 1.0f;
+  const auto r2 = atlasFromManifest(manifest, nowLit);
+  ASSERT_FALSE(r2.ok());
+  EXPECT_NE(r2.error().find("'quad3'"), std::string::npos) << r2.error();
+  Scene nowDark = scene;
+  nowDark.objects[4].settings.scaleInLightmap = 0.0f;
+  const auto r3 = atlasFromManifest(manifest, nowDark);
+  ASSERT_FALSE(r3.ok());
+  EXPECT_NE(r3.error().find("'quad4'"), std::string::npos) << r3.error();
+  const auto r4 = packAtlas(nowDark, locked);
+  ASSERT_FALSE(r4.ok());
+  EXPECT_NE(r4.error().find("'quad4'"), std::string::npos) << r4.error();
+}
+
+}  // namespace
+}  // namespace kiln
