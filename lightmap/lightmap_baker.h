@@ -1,0 +1,99 @@
+// lightmap_baker.h: kiln bake's pipeline from a loaded Scene to lightmap pages in memory.
+//
+// Stages (Godot's LightmapperCPU style, each a function over plain data run through
+// kiln::parallelFor with progress and cancellation):
+//   1. UVs: objects without TEXCOORD_1 get generated lightmap UVs (uv_unwrap.h);
+//   2. atlas: every lightmapped object gets a page rectangle (atlas.h), or a locked layout;
+//   3. texels: conservative rasterization gives each texel its sample point(s) (texel_raster.h);
+//   4. sample points pushed out of nearby geometry (walls meeting floors neither leak nor
+//      self-shadow);
+//   5. light: the integrator's irradiance at every sample point; texel value = E / pi;
+//      validity from the share of back-face hits; optional ambient occlusion;
+//   6. post: invalid texels filled, denoised, dilated into padding, seams stitched
+//      (postprocess.h, seams.h).
+// Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
+#pragma once
+
+#include <atomic>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lightmap/atlas.h"
+#include "lightmap/uv_unwrap.h"
+#include "src/image.h"
+#include "src/progress.h"
+#include "src/result.h"
+#include "src/scene.h"
+
+namespace kiln {
+
+// Everything a bake needs besides the scene. The CLI fills it from presets, the scene's
+// extras.kiln and the command line (command line wins).
+struct LightmapBakeSettings {
+  // Atlas.
+  float resolution = 10.0f;  // texels per world unit, before each object's scaleInLightmap
+  int padding = 2;           // texels
+  int maxSize = 1024;        // page width/height limit, texels
+  std::optional<AtlasLayout> lockedAtlas;  // --lock-atlas
+  // Sampling.
+  int samplesPerTexel = 256;  // paths per texel (split over the supersamples)
+  int supersampling = 1;      // n x n sample points per texel
+  uint64_t seed = 0;
+  // Light transport (see IntegratorSettings).
+  int bounces = 3;
+  float albedoBoost = 1.0f;
+  float indirectIntensity = 1.0f;
+  // Validity: a texel whose rays see back faces more often than this is inside geometry.
+  float backfaceTolerance = 0.5f;
+  // Ambient occlusion map (0 = fully occluded, 1 = open), rays of length aoMaxDistance;
+  // aoAmount blends it towards 1 (0 = no effect).
+  bool ambientOcclusion = false;
+  float aoMaxDistance = 1.0f;
+  float aoAmount = 1.0f;
+  // Post.
+  bool denoise = true;
+  bool stitchSeams = true;
+  // Execution.
+  int threads = 0;  // 0 = all cores
+};
+
+// Applies a quality preset ("preview", "low", "medium", "high", "production") to the
+// sampling settings. Returns an error naming the valid presets for an unknown name.
+Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& settings);
+
+struct LightmapPageResult {
+  Image light;                 // RGB, E / pi, glTF orientation (row 0 = v 0)
+  Image ambientOcclusion;      // 1 channel when settings.ambientOcclusion, else empty
+  std::vector<uint8_t> valid;  // per texel: 1 = baked and valid, 0 = padding/filled
+};
+
+struct LightmapBakeStats {
+  size_t texels = 0;        // texels baked (covered by objects)
+  size_t invalidTexels = 0;  // inside geometry, filled from neighbours
+  uint64_t rays = 0;        // every ray traced by the integrator
+  double seconds = 0.0;     // wall time of the light stage
+};
+
+struct LightmapBakeResult {
+  // The scene as baked: objects whose UVs were generated are replaced by their unwrapped
+  // copies (vertices split at chart seams, uv1 set).
+  Scene scene;
+  // Per Scene::objects entry: the unwrap that produced its uv1, when generated (the glTF
+  // writer rebuilds those meshes).
+  std::vector<std::optional<UnwrapResult>> unwraps;
+  AtlasLayout layout;
+  std::vector<LightmapPageResult> pages;  // one per layout.pages entry
+  std::vector<std::string> warnings;
+  LightmapBakeStats stats;
+};
+
+// Bakes every lightmapped object of `scene`. Deterministic: the same scene and settings give
+// bit-identical pages at any thread count. Reports progress when `progress` is given; stops
+// early and returns an Error "cancelled" when *cancel becomes true. Errors name the object
+// and the setting at fault (e.g. a maxSize that cannot fit one object).
+Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeSettings& settings,
+                                         bool showProgress = false,
+                                         const std::atomic<bool>* cancel = nullptr);
+
+}  // namespace kiln

@@ -1,0 +1,31 @@
+// lightmap_writer.h: kiln bake's output files: OpenEXR pages, manifest.json, the output glTF.
+//
+// Files (MISSION.md "Output"): DIR/lightmap-<i>_light.exr (half RGB, E / pi, glTF
+// orientation), DIR/lightmap-<i>_ao.exr when baked, optional 8-bit PNGs (RGBM or dLDR,
+// ldr_encoding.h), DIR/manifest.json ({"version": 1, "lightmaps": [...], "objects": [...],
+// "settings": {...}}) and DIR/<scene>.gltf referencing the lightmaps and carrying generated
+// TEXCOORD_1. Every file is written to a temporary name first and all are renamed only when
+// all were written, so a failed or cancelled bake leaves earlier outputs intact.
+#pragma once
+
+#include <string>
+
+#include "lightmap/lightmap_baker.h"
+#include "src/result.h"
+
+namespace kiln {
+
+enum class LdrEncoding { None, Rgbm, Dldr };
+
+struct LightmapOutputSettings {
+  std::string outDir;
+  LdrEncoding ldr = LdrEncoding::None;
+};
+
+// Writes the outputs of `result`, baked from the glTF file `scenePath` with `settings`
+// (recorded in the manifest).
+Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResult& result,
+                            const LightmapBakeSettings& settings,
+                            const LightmapOutputSettings& output);
+
+}  // namespace kiln
