@@ -280,8 +280,10 @@ vec3 Integrator::albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const {
 // `direct`, everything else to `indirect`. bsdfPdf > 0 is the solid-angle pdf with which
 // vertex 0 cosine-sampled the ray, and means vertex 0 ran emitter/sky NEE (so emission
 // hit by this ray is MIS-weighted); bsdfPdf = 0 counts it fully.
+// `backFaceHits`, when given, counts a first hit on the back of a single-sided, non-BLEND
+// surface (the path started inside geometry).
 void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,
-                           vec3& indirect) const {
+                           vec3& indirect, uint32_t* backFaceHits) const {
   SampleStream stream(key, sampleIndex);
   vec3 beta(1.0f);  // path throughput since vertex 0
   vec3 from = ray.origin;
@@ -338,6 +340,9 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
     }
     const Hit& h = *hit;
     const Material& m = scene_.materialOf(h.object, h.triangle);
+    if (vertex == 1 && backFaceHits && h.backFace && !m.doubleSided &&
+        m.alphaMode != AlphaMode::Blend)
+      ++*backFaceHits;
     // The back of a single-sided surface is the inside of geometry: it reflects nothing.
     if (h.backFace && !m.doubleSided) return;
     // Vertex maxBounces + 1 only completes the MIS of vertex maxBounces's emitter NEE.
@@ -376,7 +381,7 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
 }
 
 LightingEstimate Integrator::irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
-                                        uint32_t sampleCount) const {
+                                        uint32_t sampleCount, uint32_t* backFaceHits) const {
   LightingEstimate estimate;
   if (sampleCount == 0) return estimate;
   n = glm::normalize(n);
@@ -397,7 +402,8 @@ LightingEstimate Integrator::irradiance(vec3 p, vec3 n, uint64_t key, uint32_t f
     const float pdf = cosineHemispherePdf(local.z);
     if (pdf > 0.0f) {
       vec3 ld(0.0f), li(0.0f);
-      tracePath(Ray{origin, frame.toWorld(local), 0.0f, kInfinity}, pdf, key, s, ld, li);
+      tracePath(Ray{origin, frame.toWorld(local), 0.0f, kInfinity}, pdf, key, s, ld, li,
+                backFaceHits);
       // L cos / pdf with pdf = cos / pi.
       direct += kPi * ld;
       indirect += kPi * li;

@@ -63,8 +63,12 @@ class Integrator {
   // Irradiance E at point p on a surface with unit normal n (the side light arrives from),
   // averaged over samples [firstSample, firstSample + sampleCount) of the stream `key`.
   // p should already lie outside geometry; rays leave from p offset along n.
+  // When `backFaceHits` is given, the number of samples whose first (cosine-sampled) ray
+  // hit the back face of a single-sided, non-BLEND surface is added to it: a point whose
+  // rays mostly see back faces is inside geometry (lightmap texel validity, as probe
+  // validity in Unity's Adaptive Probe Volumes). Does not change the estimate.
   LightingEstimate irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
-                              uint32_t sampleCount) const;
+                              uint32_t sampleCount, uint32_t* backFaceHits = nullptr) const;
 
   // Radiance arriving at p from unit direction `dir` (one path, sample `sampleIndex` of
   // stream `key`): direct = emission seen along the ray (sky, emissive surface); indirect =
@@ -108,7 +112,7 @@ class Integrator {
   float emitterPdf(uint32_t object, uint32_t triangle, float distance2, float cosLight) const;
   vec3 albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const;
   void tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,
-                 vec3& indirect) const;
+                 vec3& indirect, uint32_t* backFaceHits = nullptr) const;
 
   const Scene& scene_;
   const Tracer& tracer_;

@@ -1,0 +1,452 @@
+// lightmap_baker.cpp: kiln bake's pipeline (see lightmap_baker.h): UVs, atlas, texels,
+// push-out, light, post. One function per stage over plain data, each run through
+// kiln::parallelFor with progress and the cancel flag (Godot's LightmapperCPU layout).
+//
+// Choices worth knowing:
+//   - Irradiance is estimated with the interpolated shading normal (the normal a shader
+//     lights the texel with; scenes without normal maps have nothing finer).
+//   - Randomness: texel t of page p draws from the stream hashValues(seed, p, t); its
+//     supersample points take disjoint, consecutive index ranges of that stream, so the
+//     union of a texel's paths is one stratified Sobol prefix (better than independent
+//     streams per point) and nothing depends on the thread that ran it.
+//   - Validity is decided per sample point: a point whose first rays see back faces more
+//     often than backfaceTolerance is inside geometry and is dropped; a texel is invalid
+//     when all its points are (then filled from valid neighbours).
+//   - Post order: denoise (valid texels only), then fill invalid texels from the denoised
+//     values (so filled texels inherit no noise), dilate into padding, stitch seams.
+#include "lightmap/lightmap_baker.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "lightmap/postprocess.h"
+#include "lightmap/seams.h"
+#include "lightmap/texel_raster.h"
+#include "src/integrator.h"
+#include "src/parallel.h"
+#include "src/tracer.h"
+
+namespace kiln {
+
+namespace {
+
+constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
+// Light batches per texel: the spread of batch means estimates each texel's variance for
+// the denoiser (the batches together are exactly the full estimate).
+constexpr uint32_t kVarianceBatches = 4;
+// Push-out: rays in 8 directions of the surface's tangent plane, reaching this many texel
+// edges, repeated this many times (a point in a corner of two solids needs two moves).
+constexpr int kPushDirections = 8;
+constexpr float kPushReachTexels = 1.0f;
+constexpr int kPushPasses = 2;
+
+Status validate(const LightmapBakeSettings& s) {
+  auto bad = [](const std::string& what) { return Status(Error{"lightmap bake: " + what}); };
+  if (!(s.resolution > 0.0f) || !std::isfinite(s.resolution))
+    return bad("resolution must be > 0 texels per unit (got " + std::to_string(s.resolution) + ")");
+  if (s.padding < 0) return bad("padding must be >= 0 (got " + std::to_string(s.padding) + ")");
+  if (s.maxSize < 1 + 2 * s.padding)
+    return bad("maxSize " + std::to_string(s.maxSize) + " cannot hold one texel with padding " +
+               std::to_string(s.padding) +
+               " on both sides (needs >= " + std::to_string(1 + 2 * s.padding) + ")");
+  if (s.samplesPerTexel < 1)
+    return bad("samplesPerTexel must be >= 1 (got " + std::to_string(s.samplesPerTexel) + ")");
+  if (s.supersampling < 1 || s.supersampling > 16)
+    return bad("supersampling must be in [1, 16] (got " + std::to_string(s.supersampling) + ")");
+  if (s.samplesPerTexel < s.supersampling * s.supersampling)
+    return bad("samplesPerTexel " + std::to_string(s.samplesPerTexel) +
+               " is fewer than the supersampling's " +
+               std::to_string(s.supersampling * s.supersampling) +
+               " points per texel (every point needs a sample)");
+  if (s.bounces < 0) return bad("bounces must be >= 0 (got " + std::to_string(s.bounces) + ")");
+  if (!(s.albedoBoost > 0.0f))
+    return bad("albedoBoost must be > 0 (got " + std::to_string(s.albedoBoost) + ")");
+  if (!(s.indirectIntensity >= 0.0f))
+    return bad("indirectIntensity must be >= 0 (got " + std::to_string(s.indirectIntensity) + ")");
+  if (!(s.backfaceTolerance >= 0.0f && s.backfaceTolerance <= 1.0f))
+    return bad("backfaceTolerance must be in [0, 1] (got " + std::to_string(s.backfaceTolerance) +
+               ")");
+  if (s.ambientOcclusion && !(s.aoMaxDistance > 0.0f))
+    return bad("aoMaxDistance must be > 0 (got " + std::to_string(s.aoMaxDistance) + ")");
+  if (s.ambientOcclusion && !(s.aoAmount >= 0.0f && s.aoAmount <= 1.0f))
+    return bad("aoAmount must be in [0, 1] (got " + std::to_string(s.aoAmount) + ")");
+  return Status::success();
+}
+
+bool cancelled(const std::atomic<bool>* cancel) { return cancel && cancel->load(); }
+
+// A covered texel: its page and index in the page.
+struct TexelRef {
+  uint32_t page;
+  uint32_t index;
+};
+
+std::vector<TexelRef> coveredTexels(const std::vector<RasterPage>& pages) {
+  std::vector<TexelRef> refs;
+  for (uint32_t p = 0; p < pages.size(); ++p)
+    for (uint32_t i = 0; i < pages[p].texels.size(); ++i)
+      if (pages[p].texels[i].valid()) refs.push_back({p, i});
+  return refs;
+}
+
+// The sample points a texel's light is estimated at: its supersample points, or the main
+// sample (supersampling 1, or a sliver no grid point fell on).
+std::pair<TexelPoint*, uint32_t> texelPoints(RasterPage& page, TexelSample& texel,
+                                             int supersampling) {
+  if (supersampling > 1 && texel.subsampleCount > 0)
+    return {&page.subsamples[texel.firstSubsample], texel.subsampleCount};
+  return {&texel.sample, 1u};
+}
+
+// Stage 4, one point: rays along the surface's tangent plane (geometric normal of its
+// triangle) of length `reach`; when one hits the back of a single-sided solid surface, the
+// point lies inside that solid (a floor under a wall, a box standing on it), so it moves
+// past the nearest such surface along that ray. The classic lightmapper fix (Bakery's and
+// lightmapper.h's sample push-off, Unity's "Push Off"): without it, texels under a wall
+// take light from the other side (leaks) and texels at its base shadow themselves.
+// Returns the rays traced.
+uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object, float reach,
+                      TexelPoint& point) {
+  const vec3 ng = scene.objects[object].faceNormal(point.triangle);
+  if (!(glm::dot(ng, ng) > 0.0f)) return 0;
+  const Frame frame = Frame::fromNormal(ng);
+  uint32_t rays = 0;
+  for (int pass = 0; pass < kPushPasses; ++pass) {
+    const vec3 origin = offsetRayOrigin(point.position, ng);
+    float nearest = reach;
+    vec3 direction(0.0f);
+    for (int d = 0; d < kPushDirections; ++d) {
+      const float phi = 2.0f * kPi * float(d) / float(kPushDirections);
+      const vec3 dir = std::cos(phi) * frame.t + std::sin(phi) * frame.b;
+      ++rays;
+      const auto hit = tracer.intersect(Ray{origin, dir, 0.0f, nearest});
+      if (!hit || !hit->backFace) continue;
+      const Material& m = scene.materialOf(hit->object, hit->triangle);
+      if (m.doubleSided || m.alphaMode == AlphaMode::Blend) continue;
+      nearest = hit->t;
+      direction = dir;
+    }
+    if (!(glm::dot(direction, direction) > 0.0f)) break;
+    // Past the surface by the tracer's own offset (scale-aware) plus a thousandth of a texel.
+    const vec3 exit = origin + nearest * direction;
+    point.position = offsetRayOrigin(exit, direction) + (1e-3f * reach) * direction;
+  }
+  return rays;
+}
+
+// Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
+bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
+                  const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
+                  bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays) {
+  Progress progress("push-out", texels.size(), "texels", showProgress);
+  options.progress = &progress;
+  options.grain = 64;
+  const bool done = parallelFor(
+      texels.size(),
+      [&](size_t begin, size_t end) {
+        uint64_t local = 0;
+        for (size_t i = begin; i < end; ++i) {
+          RasterPage& page = pages[texels[i].page];
+          TexelSample& texel = page.texels[texels[i].index];
+          const uint32_t object = uint32_t(texel.object);
+          const float reach = kPushReachTexels / layout.objects[object].texelsPerUnit;
+          local += pushOutPoint(scene, tracer, object, reach, texel.sample);
+          for (uint32_t s = 0; s < texel.subsampleCount; ++s)
+            local += pushOutPoint(scene, tracer, object, reach,
+                                  page.subsamples[texel.firstSubsample + s]);
+        }
+        rays += local;
+      },
+      options);
+  if (done) progress.finish();
+  return done;
+}
+
+// Stage 5 output for one covered texel.
+struct TexelLight {
+  vec3 value{0.0f};       // E / pi over the texel's valid points
+  float variance = 0.0f;  // of the luminance of `value` (from batch means)
+  float ao = 1.0f;
+  bool valid = false;
+};
+
+struct LightSettings {
+  uint32_t samples = 1;
+  int supersampling = 1;
+  uint64_t seed = 0;
+  float backfaceTolerance = 0.5f;
+  bool ambientOcclusion = false;
+  float aoMaxDistance = 1.0f;
+  float aoAmount = 1.0f;
+};
+
+// Stage 5, one texel: samples split evenly over its points (point i takes indices
+// [i S / k, (i + 1) S / k) of the texel's stream), each point's share in kVarianceBatches
+// batches; points inside geometry (back-face share > tolerance) are dropped.
+TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
+                      const TexelPoint* points, uint32_t pointCount, uint64_t& aoRays) {
+  TexelLight out;
+  glm::dvec3 sum(0.0);
+  uint32_t used = 0;
+  double aoOccluded = 0.0;
+  std::vector<std::pair<double, uint32_t>> batches;  // (luminance of batch mean, size)
+  for (uint32_t i = 0; i < pointCount; ++i) {
+    const uint32_t first = uint32_t(uint64_t(i) * s.samples / pointCount);
+    const uint32_t count = uint32_t(uint64_t(i + 1) * s.samples / pointCount) - first;
+    if (count == 0) continue;
+    const TexelPoint& p = points[i];
+    uint32_t backFaces = 0;
+    const uint32_t nb = std::min(kVarianceBatches, count);
+    glm::dvec3 pointSum(0.0);
+    const size_t batchStart = batches.size();
+    for (uint32_t b = 0; b < nb; ++b) {
+      const uint32_t bFirst = first + b * count / nb;
+      const uint32_t bCount = first + (b + 1) * count / nb - bFirst;
+      const vec3 e =
+          integrator.irradiance(p.position, p.normal, key, bFirst, bCount, &backFaces).total();
+      pointSum += glm::dvec3(e) * double(bCount);
+      batches.push_back({double(luminance(e)) * kInvPi, bCount});
+    }
+    if (float(backFaces) > s.backfaceTolerance * float(count)) {
+      batches.resize(batchStart);  // inside geometry: this point does not count
+      continue;
+    }
+    sum += pointSum;
+    used += count;
+    if (s.ambientOcclusion) {
+      // Cosine-weighted rays of length aoMaxDistance; the fraction that hits anything.
+      const Frame frame = Frame::fromNormal(p.normal);
+      const vec3 origin = offsetRayOrigin(p.position, p.normal);
+      const uint64_t aoKey = hashValues(key, kAoTag);
+      for (uint32_t j = first; j < first + count; ++j) {
+        SampleStream stream(aoKey, j);
+        const vec3 dir = frame.toWorld(squareToCosineHemisphere(stream.get2D()));
+        if (integrator.tracer().occluded(Ray{origin, dir, 0.0f, s.aoMaxDistance}))
+          aoOccluded += 1.0;
+      }
+      aoRays += count;
+    }
+  }
+  if (used == 0) return out;
+  out.valid = true;
+  out.value = vec3(sum / double(used)) * kInvPi;
+  if (s.ambientOcclusion) out.ao = 1.0f - s.aoAmount * float(aoOccluded / double(used));
+  // Variance of the mean from the spread of the batch means (batches of near-equal size).
+  if (batches.size() >= 2) {
+    const double mean = double(luminance(out.value));
+    double ss = 0.0;
+    for (const auto& [l, n] : batches) ss += (l - mean) * (l - mean);
+    const double m = double(batches.size());
+    out.variance = float(ss / (m * (m - 1.0)));
+  }
+  return out;
+}
+
+// Stage 5: light at every covered texel.
+bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
+                const Integrator& integrator, const LightSettings& s, bool showProgress,
+                ParallelOptions options, std::vector<TexelLight>& out,
+                std::atomic<uint64_t>& rays) {
+  Progress progress("bake", texels.size(), "texels", showProgress);
+  options.progress = &progress;
+  options.grain = 4;
+  out.assign(texels.size(), TexelLight{});
+  const bool done = parallelFor(
+      texels.size(),
+      [&](size_t begin, size_t end) {
+        const uint64_t before = Integrator::threadRayCount();
+        uint64_t aoRays = 0;
+        for (size_t i = begin; i < end; ++i) {
+          RasterPage& page = pages[texels[i].page];
+          TexelSample& texel = page.texels[texels[i].index];
+          const auto [points, count] = texelPoints(page, texel, s.supersampling);
+          const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
+          out[i] = lightTexel(integrator, s, key, points, count, aoRays);
+        }
+        rays += Integrator::threadRayCount() - before + aoRays;
+      },
+      options);
+  if (done) progress.finish();
+  return done;
+}
+
+// Stage 6 for one page: denoise, fill invalid texels, dilate into padding, stitch seams.
+void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
+              const RasterPage& raster, const std::vector<TexelRef>& texels,
+              const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
+              const ParallelOptions& parallel, LightmapPageResult& result) {
+  const int w = raster.width, h = raster.height;
+  const size_t n = size_t(w) * size_t(h);
+  LightmapPage page;
+  page.radiance = Image(w, h, 3);
+  page.valid.assign(n, 0);
+  page.objectId.assign(n, -1);
+  page.normal = Image(w, h, 3);
+  page.position = Image(w, h, 3);
+  page.variance.assign(n, 0.0f);
+  page.texelWorldSize.assign(n, 0.0f);
+  Image ao = settings.ambientOcclusion ? Image(w, h, 1) : Image();
+  for (size_t i = 0; i < texels.size(); ++i) {
+    if (texels[i].page != pageIndex) continue;
+    const size_t t = texels[i].index;
+    const TexelSample& texel = raster.texels[t];
+    page.objectId[t] = texel.object;
+    page.valid[t] = light[i].valid ? 1 : 0;
+    page.variance[t] = light[i].variance;
+    page.texelWorldSize[t] = 1.0f / layout.objects[size_t(texel.object)].texelsPerUnit;
+    for (int c = 0; c < 3; ++c) {
+      page.radiance.pixels[3 * t + c] = light[i].value[c];
+      page.normal.pixels[3 * t + c] = texel.sample.normal[c];
+      page.position.pixels[3 * t + c] = texel.sample.position[c];
+    }
+    if (!ao.empty()) ao.pixels[t] = light[i].ao;
+  }
+  result.valid = page.valid;
+  result.position = page.position;
+
+  FillSettings fill;
+  fill.parallel = parallel;
+  DenoiseSettings denoiseSettings;
+  denoiseSettings.parallel = parallel;
+  if (settings.denoise) denoise(page, denoiseSettings);
+  const std::vector<uint8_t> filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
+  // Rings enough to cover the gutters between objects (2 x padding) and between charts.
+  const int rings = std::max(2, 2 * settings.padding);
+  const std::vector<uint8_t> mask = dilate(page.radiance, filled, rings, parallel);
+  if (settings.stitchSeams) {
+    for (size_t o = 0; o < scene.objects.size(); ++o) {
+      if (layout.objects[o].lightmapIndex != int(pageIndex)) continue;
+      const auto seams = findSeams(scene.objects[o], layout.objects[o].scaleOffset, w, h);
+      if (!seams.empty()) (void)stitchSeams(page.radiance, mask, seams);
+    }
+  }
+  result.light = std::move(page.radiance);
+
+  if (!ao.empty()) {
+    if (settings.denoise) {
+      LightmapPage aoPage = page;  // guides; radiance replaced by the AO map
+      aoPage.radiance = std::move(ao);
+      aoPage.variance.clear();
+      denoise(aoPage, denoiseSettings);
+      ao = std::move(aoPage.radiance);
+    }
+    const std::vector<uint8_t> aoFilled = fillInvalid(ao, page.valid, page.objectId, fill);
+    (void)dilate(ao, aoFilled, rings, parallel);
+    result.ambientOcclusion = std::move(ao);
+  }
+}
+
+}  // namespace
+
+Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& settings) {
+  struct Preset {
+    const char* name;
+    int samples;
+    int supersampling;
+  };
+  static constexpr Preset kPresets[] = {{"preview", 16, 1},
+                                        {"low", 64, 1},
+                                        {"medium", 256, 1},
+                                        {"high", 1024, 2},
+                                        {"production", 4096, 2}};
+  for (const Preset& p : kPresets) {
+    if (preset != p.name) continue;
+    settings.samplesPerTexel = p.samples;
+    settings.supersampling = p.supersampling;
+    return Status::success();
+  }
+  return Error{"unknown quality preset \"" + preset +
+               "\" (valid: preview, low, medium, high, production)"};
+}
+
+Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeSettings& settings,
+                                         bool showProgress, const std::atomic<bool>* cancel) {
+  if (Status s = validate(settings); !s) return Error{s.error()};
+  if (cancelled(cancel)) return Error{"cancelled"};
+  ParallelOptions parallel;
+  parallel.threads = settings.threads;
+  parallel.cancel = cancel;
+
+  LightmapBakeResult result;
+  result.scene = scene;
+  // Stage 1: UVs.
+  UnwrapSettings unwrap;
+  unwrap.gutterTexels = std::max(1, settings.padding);
+  auto unwraps = generateMissingLightmapUvs(result.scene, settings.resolution, unwrap);
+  if (!unwraps) return Error{"lightmap UVs: " + unwraps.error()};
+  result.unwraps = std::move(unwraps).value();
+  if (cancelled(cancel)) return Error{"cancelled"};
+
+  // Stage 2: atlas.
+  AtlasSettings atlas;
+  atlas.resolution = settings.resolution;
+  atlas.padding = settings.padding;
+  atlas.maxSize = settings.maxSize;
+  atlas.locked = settings.lockedAtlas;
+  auto layout = packAtlas(result.scene, atlas);
+  if (!layout) return Error{"lightmap atlas: " + layout.error()};
+  result.layout = std::move(layout).value();
+  result.warnings = result.layout.warnings;
+  if (cancelled(cancel)) return Error{"cancelled"};
+
+  // Stage 3: texels.
+  RasterSettings raster;
+  raster.supersampling = settings.supersampling;
+  raster.parallel = parallel;
+  auto rasterPages = rasterizeAtlas(result.scene, result.layout, raster);
+  if (!rasterPages) return Error{"lightmap texels: " + rasterPages.error()};
+  std::vector<RasterPage> pages = std::move(rasterPages).value();
+  if (cancelled(cancel)) return Error{"cancelled"};
+  const std::vector<TexelRef> texels = coveredTexels(pages);
+
+  auto tracer = Tracer::create(result.scene);
+  if (!tracer) return Error{"lightmap bake: " + tracer.error()};
+  std::atomic<uint64_t> rays{0};
+
+  // Stage 4: push-out.
+  if (!pushOutStage(pages, texels, result.scene, result.layout, **tracer, showProgress, parallel,
+                    rays) ||
+      cancelled(cancel))
+    return Error{"cancelled"};
+
+  // Stage 5: light.
+  IntegratorSettings is;
+  is.maxBounces = settings.bounces;
+  is.albedoBoost = settings.albedoBoost;
+  is.indirectIntensity = settings.indirectIntensity;
+  const Integrator integrator(result.scene, **tracer, is);
+  LightSettings ls;
+  ls.samples = uint32_t(settings.samplesPerTexel);
+  ls.supersampling = settings.supersampling;
+  ls.seed = settings.seed;
+  ls.backfaceTolerance = settings.backfaceTolerance;
+  ls.ambientOcclusion = settings.ambientOcclusion;
+  ls.aoMaxDistance = settings.aoMaxDistance;
+  ls.aoAmount = settings.aoAmount;
+  std::vector<TexelLight> light;
+  const auto start = std::chrono::steady_clock::now();
+  if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
+      cancelled(cancel))
+    return Error{"cancelled"};
+  result.stats.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  // Stage 6: post, page by page (each post function is parallel inside).
+  result.pages.resize(pages.size());
+  for (uint32_t p = 0; p < pages.size(); ++p) {
+    postPage(result.scene, result.layout, p, pages[p], texels, light, settings, parallel,
+             result.pages[p]);
+    if (cancelled(cancel)) return Error{"cancelled"};
+  }
+
+  result.stats.texels = texels.size();
+  for (const TexelLight& t : light) result.stats.invalidTexels += t.valid ? 0 : 1;
+  result.stats.rays = rays.load();
+  if (result.stats.invalidTexels > 0 && result.stats.invalidTexels * 10 > texels.size())
+    result.warnings.push_back(std::to_string(result.stats.invalidTexels) + " of " +
+                              std::to_string(texels.size()) +
+                              " texels are inside geometry (filled from neighbours)");
+  return result;
+}
+
+}  // namespace kiln

@@ -1,0 +1,416 @@
+// lightmap_bake_test.cpp: the lightmap bake pipeline (lightmap/lightmap_baker.h): analytic
+// texel values (cosine law, constant sky, inverse square, ambient occlusion under a plane),
+// 1/sqrt(samples) convergence, no sun leaking through the two-room scene's shared wall,
+// invalid texels inside geometry filled, determinism across thread counts, cancellation,
+// presets and setting errors.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <thread>
+
+#include "lightmap/lightmap_baker.h"
+#include "src/gltf_loader.h"
+#include "tests/test_util.h"
+
+namespace kiln {
+namespace {
+
+// A 2 m x 2 m quad in the plane y = 0 facing +y (uv1 = its unit square).
+Scene quadScene() {
+  Scene scene;
+  const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  test::addQuad(scene, "quad", vec3(0, 0, 0), vec3(2, 0, 0), vec3(2, 0, -2), vec3(0, 0, -2), m);
+  return scene;
+}
+
+LightmapBakeSettings smallSettings() {
+  LightmapBakeSettings s;
+  s.resolution = 8.0f;
+  s.maxSize = 64;
+  s.samplesPerTexel = 16;
+  return s;
+}
+
+vec3 texel(const Image& image, size_t i) {
+  return vec3(image.pixels[3 * i], image.pixels[3 * i + 1], image.pixels[3 * i + 2]);
+}
+
+// Runs `f(page, texel index)` over every valid texel of every page.
+template <typename F>
+void forValidTexels(const LightmapBakeResult& r, F f) {
+  for (const LightmapPageResult& page : r.pages)
+    for (size_t i = 0; i < page.valid.size(); ++i)
+      if (page.valid[i]) f(page, i);
+}
+
+TEST(LightmapBake, DirectionalLightCosineLaw) {
+  Scene scene = quadScene();
+  const float theta = glm::radians(35.0f), lux = 7.0f;
+  scene.lights.push_back(
+      test::directionalLight(vec3(std::sin(theta), -std::cos(theta), 0.0f), lux));
+  LightmapBakeSettings s = smallSettings();
+  s.bounces = 0;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const float expected = lux * std::cos(theta) * kInvPi;
+  size_t count = 0;
+  forValidTexels(*r, [&](const LightmapPageResult& page, size_t i) {
+    const vec3 v = texel(page.light, i);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(v[c], expected, 1e-5f * expected);
+    ++count;
+  });
+  EXPECT_EQ(count, 16u * 16u);  // 2 m at 8 texels/m, all fully covered
+  EXPECT_EQ(r->stats.texels, 256u);
+  EXPECT_EQ(r->stats.invalidTexels, 0u);
+}
+
+TEST(LightmapBake, ConstantSkyGivesItsRadiance) {
+  Scene scene = quadScene();
+  const vec3 sky(0.3f, 0.6f, 1.2f);
+  scene.sky = Sky::constant(sky);
+  LightmapBakeSettings s = smallSettings();
+  s.bounces = 0;
+  s.samplesPerTexel = 64;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  // E = pi L over the open hemisphere, so E / pi = L; MIS of sky and cosine sampling of a
+  // constant sky is nearly noise-free.
+  forValidTexels(*r, [&](const LightmapPageResult& page, size_t i) {
+    const vec3 v = texel(page.light, i);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(v[c], sky[c], 2e-3f * sky[c]);
+  });
+}
+
+TEST(LightmapBake, PointLightInverseSquareAtSamplePoints) {
+  Scene scene = quadScene();
+  const vec3 light(0.7f, 1.0f, -1.2f);
+  const float candela = 5.0f;
+  scene.lights.push_back(test::pointLight(light, candela));
+  LightmapBakeSettings s = smallSettings();
+  s.bounces = 0;
+  s.denoise = false;  // the gradient must come through untouched
+  s.stitchSeams = false;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  double maxRel = 0.0;
+  forValidTexels(*r, [&](const LightmapPageResult& page, size_t i) {
+    const vec3 p(page.position.pixels[3 * i], page.position.pixels[3 * i + 1],
+                 page.position.pixels[3 * i + 2]);
+    const vec3 d = light - p;
+    const float r2 = glm::dot(d, d);
+    const float expected = candela * (d.y / std::sqrt(r2)) / r2 * kInvPi;
+    const float v = texel(page.light, i).x;
+    maxRel = std::max(maxRel, double(std::abs(v - expected) / expected));
+  });
+  std::printf("point light: max relative error %.2e\n", maxRel);
+  EXPECT_LT(maxRel, 1e-5);
+}
+
+TEST(LightmapBake, AmbientOcclusionUnderAPlane) {
+  // A ceiling at height h over the quad, extending past it by more than the AO distance D:
+  // for it an infinite plane. A cosine-weighted ray hits it within D when cos > h / D, which
+  // has probability 1 - (h / D)^2.
+  Scene scene = quadScene();
+  const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  const float h = 0.5f, D = 1.0f;
+  const uint32_t ceiling = test::addQuad(scene, "ceiling", vec3(-2, h, 2), vec3(-2, h, -4),
+                                         vec3(4, h, -4), vec3(4, h, 2), m);
+  scene.objects[ceiling].settings.scaleInLightmap = 0.0f;
+  LightmapBakeSettings s = smallSettings();
+  s.bounces = 0;
+  s.samplesPerTexel = 256;
+  s.denoise = false;
+  s.ambientOcclusion = true;
+  s.aoMaxDistance = D;
+  s.aoAmount = 0.8f;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const float expected = 1.0f - s.aoAmount * (1.0f - (h / D) * (h / D));
+  double sum = 0.0;
+  size_t n = 0;
+  forValidTexels(*r, [&](const LightmapPageResult& page, size_t i) {
+    EXPECT_NEAR(page.ambientOcclusion.pixels[i], expected, 0.03f);
+    sum += page.ambientOcclusion.pixels[i];
+    ++n;
+  });
+  ASSERT_GT(n, 0u);
+  EXPECT_NEAR(sum / double(n), expected, 2e-3);
+}
+
+// RMS difference over texels valid in both (first three channels).
+double rmsDifference(const LightmapBakeResult& a, const LightmapBakeResult& b) {
+  double sum = 0.0;
+  size_t n = 0;
+  for (size_t p = 0; p < a.pages.size(); ++p)
+    for (size_t i = 0; i < a.pages[p].valid.size(); ++i) {
+      if (!a.pages[p].valid[i] || !b.pages[p].valid[i]) continue;
+      const vec3 d = texel(a.pages[p].light, i) - texel(b.pages[p].light, i);
+      sum += glm::dot(glm::dvec3(d), glm::dvec3(d)) / 3.0;
+      ++n;
+    }
+  return n ? std::sqrt(sum / double(n)) : 0.0;
+}
+
+Scene loadShipped(const std::string& name) {
+  auto scene = loadScene(test::scenesDir() + "/" + name);
+  EXPECT_TRUE(scene.ok()) << scene.error();
+  return scene.ok() ? std::move(scene).value() : Scene{};
+}
+
+TEST(LightmapBake, ErrorFallsAsOneOverSqrtSamples) {
+  // The Cornell box (emissive ceiling light, 3 bounces) at a low resolution, denoiser off:
+  // RMS error against a bake with 64x the largest sample count.
+  const Scene scene = loadShipped("cornell_box.gltf");
+  ASSERT_FALSE(scene.objects.empty());
+  LightmapBakeSettings s;
+  s.resolution = 14.0f;
+  s.maxSize = 256;
+  s.bounces = 3;
+  s.denoise = false;
+  s.stitchSeams = false;
+  const int base = 8;
+  s.samplesPerTexel = base * 16 * 64;
+  auto reference = bakeLightmaps(scene, s);
+  ASSERT_TRUE(reference.ok()) << reference.error();
+  std::printf("convergence: %zu texels, reference %d samples/texel\n", reference->stats.texels,
+              s.samplesPerTexel);
+  double previous = 0.0;
+  for (int n = base; n <= base * 16; n *= 4) {
+    s.samplesPerTexel = n;
+    auto r = bakeLightmaps(scene, s);
+    ASSERT_TRUE(r.ok()) << r.error();
+    const double e = rmsDifference(*r, *reference);
+    std::printf("  %5d samples: RMS error %.5f", n, e);
+    if (previous > 0.0)
+      std::printf("  ratio to %d samples %.3f (1/sqrt(4) = 0.5)", n / 4, e / previous);
+    std::printf("\n");
+    ASSERT_GT(e, 0.0);
+    if (previous > 0.0) {
+      EXPECT_LE(e / previous, 0.6);
+    }
+    previous = e;
+  }
+}
+
+TEST(LightmapBake, TwoRoomsNoSunLeaksThroughTheSharedWall) {
+  // Direct light only (bounces 0, no sky): the sun enters room A (x in [0, 4]) through its
+  // window; room B (x in [4.25, 8.25]) sees no sun, so every texel there must be exactly 0,
+  // in particular the floor along the shared wall (x = 4 to 4.25), whose slab runs on under
+  // the wall into room A, and the wall's room-B face.
+  Scene scene = loadShipped("two_rooms.gltf");
+  ASSERT_FALSE(scene.objects.empty());
+  scene.sky = Sky();
+  ASSERT_EQ(scene.lights.size(), 1u);
+  const Light sun = scene.lights[0];
+  LightmapBakeSettings s;
+  s.resolution = 8.0f;
+  s.maxSize = 1024;
+  s.bounces = 0;
+  s.samplesPerTexel = 16;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const Scene& baked = r->scene;
+  int floorIndex = -1, wallIndex = -1;
+  for (size_t o = 0; o < baked.objects.size(); ++o) {
+    if (baked.objects[o].name == "floor") floorIndex = int(o);
+    if (baked.objects[o].name == "wall_shared") wallIndex = int(o);
+  }
+  ASSERT_GE(floorIndex, 0);
+  ASSERT_GE(wallIndex, 0);
+  const float sunlit = sun.intensity * sun.color.r * -sun.direction.y * kInvPi;
+
+  size_t nearWall = 0, wallFace = 0, roomB = 0, patch = 0;
+  float maxNearWall = 0.0f, maxWallFace = 0.0f, maxRoomB = 0.0f, maxA = 0.0f;
+  for (size_t o : {size_t(floorIndex), size_t(wallIndex)}) {
+    const AtlasObject& ao = r->layout.objects[o];
+    ASSERT_GE(ao.lightmapIndex, 0);
+    const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
+    const int w = page.light.width;
+    for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+      for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
+        const size_t i = size_t(y) * w + x;
+        if (!page.valid[i]) continue;
+        const vec3 p(page.position.pixels[3 * i], page.position.pixels[3 * i + 1],
+                     page.position.pixels[3 * i + 2]);
+        const float v = maxComponent(texel(page.light, i));
+        const bool inRoomZ = p.z > 0.05f && p.z < 3.95f;
+        if (int(o) == floorIndex && std::abs(p.y) < 1e-3f && inRoomZ) {
+          if (p.x > 4.25f - 1e-3f && p.x < 8.2f) {
+            roomB++;
+            maxRoomB = std::max(maxRoomB, v);
+            if (p.x < 4.25f + 0.3f) {
+              nearWall++;
+              maxNearWall = std::max(maxNearWall, v);
+            }
+          }
+          // No valid floor sample point may stay inside the wall (the doorway, z in
+          // [2.8, 3.8], is open floor).
+          const bool doorway = p.z > 2.8f - 1e-3f && p.z < 3.8f + 1e-3f;
+          EXPECT_FALSE(!doorway && p.x > 4.0f + 1e-3f && p.x < 4.25f - 1e-3f) << p.x << " " << p.z;
+          if (p.x > 0.05f && p.x < 3.95f) {
+            maxA = std::max(maxA, v);
+            if (std::abs(texel(page.light, i).r - sunlit) < 1e-3f * sunlit) patch++;
+          }
+        }
+        if (int(o) == wallIndex && std::abs(p.x - 4.25f) < 1e-3f && inRoomZ && p.y > 0.0f) {
+          wallFace++;
+          maxWallFace = std::max(maxWallFace, v);
+        }
+      }
+  }
+  std::printf(
+      "two rooms: sunlit E cos/pi = %.4f, max room A floor %.4f (%zu texels at it);\n"
+      "  room B floor max %.3g over %zu texels, within 0.3 m of the wall %.3g over %zu,"
+      " shared wall's B face %.3g over %zu\n",
+      sunlit, maxA, patch, maxRoomB, roomB, maxNearWall, nearWall, maxWallFace, wallFace);
+  EXPECT_GT(nearWall, 50u);
+  EXPECT_GT(wallFace, 100u);
+  EXPECT_EQ(maxRoomB, 0.0f);
+  EXPECT_EQ(maxNearWall, 0.0f);
+  EXPECT_EQ(maxWallFace, 0.0f);
+  EXPECT_NEAR(maxA, sunlit, 1e-3f * sunlit);
+  EXPECT_GT(patch, 20u);
+}
+
+TEST(LightmapBake, TexelsInsideGeometryAreInvalidAndFilled) {
+  // The quad (x in [0, 2]) runs into a solid block that encloses its half x > 1: texels
+  // more than a texel inside see only the block's back faces. Constant sky, no bounces.
+  Scene scene = quadScene();
+  const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  const uint32_t block =
+      test::addBox(scene, "block", vec3(1.0f, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
+  scene.objects[block].settings.scaleInLightmap = 0.0f;
+  scene.sky = Sky::constant(vec3(1.0f));
+  LightmapBakeSettings s = smallSettings();
+  s.bounces = 0;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const AtlasObject& ao = r->layout.objects[0];
+  const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
+  size_t inside = 0, pushed = 0;
+  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+    for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
+      const size_t i = size_t(y) * page.light.width + x;
+      // u = x along the quad: texel centres at (k + 0.5) / 8 m.
+      const float wx = (float(x - ao.texelMin.x) + 0.5f) / 8.0f;
+      const vec3 v = texel(page.light, i);
+      if (wx > 1.0f + 0.125f) {  // beyond the push-out reach (one texel)
+        ++inside;
+        EXPECT_EQ(page.valid[i], 0) << x << "," << y;
+        EXPECT_GT(v.x, 0.1f) << "filled, not black";
+      } else if (wx > 1.0f) {
+        ++pushed;  // within the push-out reach: moved out past the block's face, valid
+        EXPECT_EQ(page.valid[i], 1) << x << "," << y;
+        // At the block's foot the block hides less than half the sky (E / pi in (0.5, 1) L),
+        // not the darkness a point inside it would see.
+        EXPECT_GT(v.x, 0.45f);
+        EXPECT_LT(v.x, 1.0f);
+      } else {
+        EXPECT_EQ(page.valid[i], 1);
+      }
+    }
+  EXPECT_EQ(inside, 7u * 16u);
+  EXPECT_EQ(pushed, 1u * 16u);
+  EXPECT_EQ(r->stats.invalidTexels, inside);
+}
+
+TEST(LightmapBake, BitIdenticalAtAnyThreadCount) {
+  const Scene scene = loadShipped("cornell_box.gltf");
+  ASSERT_FALSE(scene.objects.empty());
+  LightmapBakeSettings s;
+  s.resolution = 16.0f;
+  s.maxSize = 256;
+  s.samplesPerTexel = 16;
+  s.supersampling = 2;
+  s.ambientOcclusion = true;
+  s.aoMaxDistance = 0.1f;
+  s.threads = 1;
+  auto a = bakeLightmaps(scene, s);
+  s.threads = 2;
+  auto b = bakeLightmaps(scene, s);
+  ASSERT_TRUE(a.ok()) << a.error();
+  ASSERT_TRUE(b.ok()) << b.error();
+  ASSERT_EQ(a->pages.size(), b->pages.size());
+  for (size_t p = 0; p < a->pages.size(); ++p) {
+    EXPECT_EQ(a->pages[p].light.pixels, b->pages[p].light.pixels);
+    EXPECT_EQ(a->pages[p].ambientOcclusion.pixels, b->pages[p].ambientOcclusion.pixels);
+    EXPECT_EQ(a->pages[p].valid, b->pages[p].valid);
+  }
+  EXPECT_EQ(a->stats.rays, b->stats.rays);
+}
+
+TEST(LightmapBake, CancelledFlagStopsTheBake) {
+  const Scene scene = loadShipped("cornell_box.gltf");
+  std::atomic<bool> cancel{true};
+  LightmapBakeSettings s;
+  s.samplesPerTexel = 4096;
+  auto r = bakeLightmaps(scene, s, false, &cancel);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error(), "cancelled");
+}
+
+TEST(LightmapBake, CancelDuringTheLightStageStopsQuickly) {
+  // A bake of minutes (two rooms at 4096 samples per texel), cancelled after 0.2 s.
+  const Scene scene = loadShipped("two_rooms.gltf");
+  std::atomic<bool> cancel{false};
+  LightmapBakeSettings s;
+  s.resolution = 8.0f;
+  s.samplesPerTexel = 4096;
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    cancel = true;
+  });
+  const auto start = std::chrono::steady_clock::now();
+  auto r = bakeLightmaps(scene, s, false, &cancel);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  canceller.join();
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error(), "cancelled");
+  std::printf("cancelled after %.2f s\n", seconds);
+  EXPECT_LT(seconds, 5.0);
+}
+
+TEST(LightmapBake, PresetsAndSettingErrors) {
+  struct Expect {
+    const char* name;
+    int samples, supersampling;
+  };
+  for (const Expect& e : {Expect{"preview", 16, 1}, Expect{"low", 64, 1}, Expect{"medium", 256, 1},
+                          Expect{"high", 1024, 2}, Expect{"production", 4096, 2}}) {
+    LightmapBakeSettings s;
+    ASSERT_TRUE(applyLightmapPreset(e.name, s).ok()) << e.name;
+    EXPECT_EQ(s.samplesPerTexel, e.samples) << e.name;
+    EXPECT_EQ(s.supersampling, e.supersampling) << e.name;
+  }
+  LightmapBakeSettings s;
+  const Status unknown = applyLightmapPreset("ultra", s);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.error().find("production"), std::string::npos) << unknown.error();
+
+  const Scene scene = quadScene();
+  auto expectError = [&](LightmapBakeSettings bad, const std::string& word) {
+    auto r = bakeLightmaps(scene, bad);
+    ASSERT_FALSE(r.ok()) << word;
+    EXPECT_NE(r.error().find(word), std::string::npos) << r.error();
+  };
+  LightmapBakeSettings bad = smallSettings();
+  bad.maxSize = 4;  // padding 2 on both sides leaves no texel
+  expectError(bad, "maxSize");
+  bad = smallSettings();
+  bad.samplesPerTexel = 2;
+  bad.supersampling = 2;
+  expectError(bad, "samplesPerTexel");
+  bad = smallSettings();
+  bad.backfaceTolerance = 1.5f;
+  expectError(bad, "backfaceTolerance");
+  bad = smallSettings();
+  bad.resolution = 0.0f;
+  expectError(bad, "resolution");
+}
+
+}  // namespace
+}  // namespace kiln
