@@ -1,0 +1,261 @@
+// probe_baker.cpp: the probe SH bake (see probe_baker.h).
+//
+// Sampling: probe i owns the stream key hashValues(seed, i). Ray s takes its direction from
+// dimensions 0-1 of SampleStream(key, s); Integrator::incomingRadiance draws from the same
+// (key, s) stream but only from dimensions of path vertices >= 1 (integrator.cpp gives
+// vertex 0, the probe, dimensions 0-11 and never draws them in incomingRadiance), so the
+// direction is independent of everything along the path. Punctual-light visibility uses a
+// side stream keyed by (key, "lights").
+// Validity: the first segment of every ray is traced here too, to see whether it ends on
+// the back face of a single-sided surface (the inside of geometry). Such a ray carries no
+// light (the integrator's back faces reflect nothing), so the integrator is skipped for it.
+#include "probes/probe_baker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "src/parallel.h"
+#include "src/sampling.h"
+#include "src/sh_projection.h"
+
+namespace kiln {
+
+namespace {
+
+constexpr uint64_t kLightsTag = 0x6c6967687473ull;  // "lights"
+
+bool isSoftShadowed(const Light& light) {
+  return light.type == LightType::Directional ? light.shadowAngle > 0.0f
+                                              : light.shadowRadius > 0.0f;
+}
+
+// Mean SH of the valid probes that share a cell with probe `i`; nullopt when there is none.
+std::optional<ShL2Rgb> validNeighbourMean(const ProbeSet& set,
+                                          const std::vector<std::vector<int32_t>>& adjacency,
+                                          const std::vector<char>& valid, int32_t i) {
+  std::array<glm::dvec3, kShL2Count> sum{};
+  int n = 0;
+  for (int32_t j : adjacency[i]) {
+    if (!valid[j]) continue;
+    for (int k = 0; k < kShL2Count; ++k) sum[k] += glm::dvec3(set.sh[j].c[k]);
+    ++n;
+  }
+  if (n == 0) return std::nullopt;
+  ShL2Rgb mean;
+  for (int k = 0; k < kShL2Count; ++k) mean.c[k] = vec3(sum[k] / double(n));
+  return mean;
+}
+
+// Probes sharing a cell, per probe (sorted, unique).
+std::vector<std::vector<int32_t>> cellAdjacency(const ProbeSet& set) {
+  std::vector<std::vector<int32_t>> adjacency(set.positions.size());
+  for (const glm::ivec4& c : set.cells) {
+    for (int a = 0; a < 4; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        if (a != b && c[a] >= 0 && c[b] >= 0 && c[a] != c[b]) adjacency[c[a]].push_back(c[b]);
+      }
+    }
+  }
+  for (auto& list : adjacency) {
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+  }
+  return adjacency;
+}
+
+std::string vecText(vec3 p) {
+  std::ostringstream s;
+  s << "(" << p.x << ", " << p.y << ", " << p.z << ")";
+  return s.str();
+}
+
+}  // namespace
+
+IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSettings& settings) {
+  IntegratorSettings is;
+  is.maxBounces = settings.bounces.value_or(scene.settings.bounces.value_or(kDefaultProbeBounces));
+  is.albedoBoost = settings.albedoBoost.value_or(scene.settings.albedoBoost.value_or(1.0f));
+  is.indirectIntensity =
+      settings.indirectIntensity.value_or(scene.settings.indirectIntensity.value_or(1.0f));
+  is.russianRouletteDepth = settings.russianRouletteDepth;
+  is.directLights.resize(scene.lights.size());
+  is.indirectLights.resize(scene.lights.size());
+  for (size_t i = 0; i < scene.lights.size(); ++i) {
+    is.directLights[i] = scene.lights[i].mode == LightMode::Baked;
+    is.indirectLights[i] = scene.lights[i].mode != LightMode::Realtime;
+  }
+  return is;
+}
+
+ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
+                      uint32_t lightSamples, const std::atomic<bool>* cancel) {
+  const Scene& scene = integrator.scene();
+  const Tracer& tracer = integrator.tracer();
+  ShL2Accumulator sum;
+  const double weight = 4.0 * double(kPi) / double(rays);
+  uint32_t backFaces = 0;
+  for (uint32_t s = 0; s < rays; ++s) {
+    // A probe can take seconds: let Ctrl-C through without waiting for it.
+    if (cancel && (s & 4095u) == 4095u && cancel->load(std::memory_order_relaxed)) break;
+    SampleStream stream(key, s);
+    stream.setDimension(0);
+    const vec3 dir = squareToUniformSphere(stream.get2D());
+    if (std::optional<Hit> hit = tracer.intersect(Ray{p, dir, 0.0f, kInfinity})) {
+      const Material& m = scene.materialOf(hit->object, hit->triangle);
+      if (hit->backFace && !m.doubleSided && m.alphaMode != AlphaMode::Blend) {
+        ++backFaces;
+        continue;  // inside geometry: no light (what incomingRadiance would return)
+      }
+    }
+    sum.add(dir, integrator.incomingRadiance(p, dir, key, s).total(), weight);
+  }
+
+  // Punctual lights: exact delta projection c_i += E Y_i(s), visibility averaged.
+  bool soft = false;
+  for (const Light& l : scene.lights) soft = soft || isSoftShadowed(l);
+  const uint32_t evaluations = soft ? std::max(1u, lightSamples) : 1u;
+  const uint64_t lightKey = hashValues(key, kLightsTag);
+  std::vector<DeltaLight> deltas;
+  for (uint32_t j = 0; j < evaluations; ++j) integrator.punctualLights(p, lightKey, j, deltas);
+  for (const DeltaLight& d : deltas) {
+    if (!isFinite(d.irradiance)) continue;
+    sum.add(d.direction, d.irradiance, 1.0 / double(evaluations));
+  }
+
+  ProbeSample out;
+  out.sh = sum.result();
+  out.validity = 1.0f - float(backFaces) / float(rays);
+  return out;
+}
+
+Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
+                            std::span<const vec3> positions, const ProbeBakeSettings& settings,
+                            Progress* progress, const std::atomic<bool>* cancel,
+                            ProbeBakeReport* report) {
+  if (positions.empty()) return Error{"no probe positions"};
+  if (settings.rays == 0) return Error{"rays per probe must be > 0"};
+  for (size_t i = 0; i < positions.size(); ++i) {
+    if (!isFinite(positions[i])) return Error{"positions[" + std::to_string(i) + "]: not finite"};
+  }
+  ProbeBakeReport local;
+  ProbeBakeReport& rep = report ? *report : local;
+  rep = ProbeBakeReport{};
+
+  Result<ProbeSet> topology = buildProbeTopology(positions, settings.topology, &rep.warnings);
+  if (!topology) return Error{"tetrahedralization: " + topology.error()};
+  ProbeSet set = std::move(topology).value();
+
+  const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, settings));
+  rep.integrator = integrator.settings();
+  const size_t count = positions.size();
+  std::vector<ProbeSample> samples(count);
+  std::atomic<uint64_t> rays{0};
+  ParallelOptions options;
+  options.threads = settings.threads;
+  options.grain = 1;  // a probe is thousands of paths: balance load probe by probe
+  options.progress = progress;
+  options.cancel = cancel;
+  const bool finished = parallelFor(
+      count,
+      [&](size_t begin, size_t end) {
+        const uint64_t before = Integrator::threadRayCount();
+        for (size_t i = begin; i < end; ++i) {
+          samples[i] = bakeProbe(integrator, positions[i], hashValues(settings.seed, i),
+                                 settings.rays, settings.lightSamples, cancel);
+        }
+        // + the first segments traced for validity.
+        rays += Integrator::threadRayCount() - before + (end - begin) * settings.rays;
+      },
+      options);
+  if (!finished || (cancel && cancel->load())) return Error{"cancelled"};
+  if (progress) progress->finish();
+  rep.rays = rays.load();
+
+  for (size_t i = 0; i < count; ++i) {
+    set.sh[i] = samples[i].sh;
+    set.validity[i] = samples[i].validity;
+  }
+
+  // Validity: probes inside geometry get their valid neighbours' mean (from the raw bake).
+  std::vector<char> valid(count);
+  for (size_t i = 0; i < count; ++i)
+    valid[i] = (1.0f - set.validity[i]) <= settings.invalidBackfaceRatio;
+  std::vector<std::vector<int32_t>> adjacency;
+  const ProbeSet raw = set;
+  for (size_t i = 0; i < count; ++i) {
+    if (valid[i]) continue;
+    rep.invalidProbes.push_back(int32_t(i));
+    bool filled = false;
+    if (settings.fillInvalid) {
+      if (adjacency.empty()) adjacency = cellAdjacency(raw);
+      if (auto mean = validNeighbourMean(raw, adjacency, valid, int32_t(i))) {
+        set.sh[i] = *mean;
+        filled = true;
+        ++rep.filledProbes;
+      }
+    }
+    rep.warnings.push_back("probe " + std::to_string(i) + " at " + vecText(positions[i]) +
+                           " is inside geometry (" +
+                           std::to_string(int(std::lround(100.0 * (1.0 - set.validity[i])))) +
+                           "% of its rays hit back faces)" +
+                           (filled ? "; its SH is the mean of its valid neighbours'" : ""));
+  }
+
+  if (settings.dering) {
+    for (size_t i = 0; i < count; ++i) {
+      DeringResult d = deringSh(set.sh[i]);
+      if (d.windowed) {
+        set.sh[i] = d.sh;
+        ++rep.deringedProbes;
+      }
+    }
+  }
+  return set;
+}
+
+Result<std::vector<vec3>> parseProbePositions(std::string_view text, std::string_view name) {
+  const std::string prefix = std::string(name) + ": ";
+  nlohmann::json doc = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded()) return Error{prefix + "not valid JSON"};
+  if (!doc.is_object() || !doc.contains("positions"))
+    return Error{prefix + "positions: missing (expected {\"positions\": [[x, y, z], ...]})"};
+  const nlohmann::json& list = doc["positions"];
+  if (!list.is_array()) return Error{prefix + "positions: expected an array"};
+  std::vector<vec3> out;
+  out.reserve(list.size());
+  for (size_t i = 0; i < list.size(); ++i) {
+    const nlohmann::json& p = list[i];
+    bool ok = p.is_array() && p.size() == 3;
+    vec3 v(0.0f);
+    for (int k = 0; ok && k < 3; ++k) {
+      ok = p[k].is_number();
+      if (ok) v[k] = p[k].get<float>();
+    }
+    if (!ok || !isFinite(v))
+      return Error{prefix + "positions[" + std::to_string(i) + "]: expected 3 finite numbers"};
+    out.push_back(v);
+  }
+  if (out.empty()) return Error{prefix + "positions: empty"};
+  return out;
+}
+
+Result<std::vector<vec3>> loadProbePositions(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error{path + ": cannot open"};
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) return Error{path + ": read error"};
+  return parseProbePositions(text.str(), path);
+}
+
+std::vector<vec3> sceneProbePositions(const Scene& scene) {
+  std::vector<vec3> out;
+  for (const ProbeGroup& g : scene.probeGroups)
+    out.insert(out.end(), g.positions.begin(), g.positions.end());
+  return out;
+}
+
+}  // namespace kiln

@@ -1,0 +1,468 @@
+// probe_bake_test.cpp: the probe SH bake (probes/probe_baker.h) against numbers physics fixes
+// (a constant sky, a directional light's delta, a point light's inverse square, an emissive
+// room), validity (inside a solid block: 0; open space: 1) and the fill of invalid probes,
+// light modes, determinism across thread counts and seeds, cancellation, the positions file,
+// and `kiln probes bake | query | export` as a user runs them.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "kiln/probe_runtime.h"
+#include "probes/probe_baker.h"
+#include "src/sh_projection.h"
+#include "tests/test_util.h"
+
+namespace kiln {
+namespace {
+
+using Json = nlohmann::json;
+using test::addBox;
+using test::addMaterial;
+using test::lambert;
+
+constexpr double kPiD = 3.14159265358979323846;
+
+struct World {
+  Scene scene;
+  std::unique_ptr<Tracer> tracer;
+
+  void build() {
+    scene.updateBounds();
+    auto created = Tracer::create(scene);
+    ASSERT_TRUE(created.ok()) << created.error();
+    tracer = std::move(created).value();
+  }
+  ProbeSample bakeOne(vec3 p, uint32_t rays, ProbeBakeSettings s = {}) const {
+    Integrator integrator(scene, *tracer, probeIntegratorSettings(scene, s));
+    return bakeProbe(integrator, p, 7, rays, s.lightSamples);
+  }
+};
+
+// Eight probes at the corners of a box around `c` (a well-shaped tetrahedralization).
+std::vector<vec3> cubeCorners(vec3 c, float h) {
+  std::vector<vec3> p;
+  for (int i = 0; i < 8; ++i)
+    p.push_back(c + h * vec3(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1));
+  return p;
+}
+
+void expectShNear(const ShL2Rgb& a, const ShL2Rgb& b, float tol, const std::string& what) {
+  for (int i = 0; i < kShL2Count; ++i)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(a.c[i][c], b.c[i][c], tol) << what << " c" << i;
+}
+
+// ---- physics --------------------------------------------------------------------------------
+
+// A constant sky L and nothing else: c0 = int L Y00 = 2 sqrt(pi) L exactly (every ray returns L
+// and the weights 4 pi / N sum to 4 pi; with sh.h's 6-digit Y00 = 0.282095 that is
+// 4 pi 0.282095 L, 7e-7 above 2 sqrt(pi) L); the other coefficients integrate to 0 and are left
+// only with the quadrature error of 4096 stratified points.
+TEST(ProbeBake, ConstantSkyGivesExactBandZero) {
+  World w;
+  const vec3 sky(0.5f, 1.0f, 2.0f);
+  w.scene.sky = Sky::constant(sky);
+  w.build();
+  const ProbeSample s = w.bakeOne(vec3(1, 2, 3), 4096);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(s.sh.c[0][c], 4.0 * kPiD * 0.282095 * sky[c], 1e-6 * sky[c]);  // to rounding
+    EXPECT_NEAR(s.sh.c[0][c], 2.0 * std::sqrt(kPiD) * sky[c],
+                1e-6 * 2.0 * std::sqrt(kPiD) * sky[c]);
+    for (int i = 1; i < kShL2Count; ++i) EXPECT_NEAR(s.sh.c[i][c], 0.0f, 1e-3f * sky[c]) << i;
+  }
+  EXPECT_EQ(s.validity, 1.0f);
+  // Irradiance is pi L for every normal.
+  EXPECT_NEAR(s.sh.irradiance(vec3(0, 1, 0)).z, kPiD * 2.0, 5e-3);
+}
+
+// A directional light of irradiance E from s, no geometry, black sky: the radiance is the
+// delta E delta(w - s), so c_i = E Y_i(s) exactly, and the L2 irradiance is the truncated
+// cosine lobe: E(n) = E (1/4 + t/2 + 5/32 (3t^2 - 1)), t = n.s (sh_projection.h), i.e.
+// E(s) = 1.0625 E facing the light and 0.0625 E facing away. Deringing (on by default) must
+// then window it, since the lobe dips to -0.0396 E at t = -8/15.
+TEST(ProbeBake, DirectionalLightIsAnExactDelta) {
+  World w;
+  const vec3 travel = glm::normalize(vec3(1, -2, 0.5f));
+  const vec3 color(1.0f, 0.5f, 0.25f);
+  const float lux = 3.0f;
+  w.scene.lights.push_back(test::directionalLight(travel, lux, color));
+  w.build();
+  const vec3 s = -travel;
+  const vec3 e = lux * color;
+  const ProbeSample probe = w.bakeOne(vec3(0.0f), 256);
+  const auto y = shBasisL2(s);
+  for (int i = 0; i < kShL2Count; ++i)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(probe.sh.c[i][c], e[c] * y[i], 1e-6f) << i;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(probe.sh.irradiance(s)[c], 1.0625f * e[c], 2e-5f);
+    EXPECT_NEAR(probe.sh.irradiance(-s)[c], 0.0625f * e[c], 2e-5f);
+  }
+  // Through bakeProbes with deringing: c0 kept, irradiance >= 0 everywhere, peak lowered.
+  ProbeBakeReport report;
+  auto set =
+      bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0.0f), 0.01f), {}, nullptr, nullptr, &report);
+  ASSERT_TRUE(set.ok()) << set.error();
+  EXPECT_EQ(report.deringedProbes, 8);
+  const vec3 minE = minIrradiance(set->sh[0]);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_GE(minE[c], -1e-6f * e[c]);
+    EXPECT_NEAR(set->sh[0].c[0][c], e[c] * y[0], 1e-6f);
+    EXPECT_LT(set->sh[0].irradiance(s)[c], 1.0625f * e[c]);
+  }
+  // Without deringing the stored SH is the raw delta.
+  ProbeBakeSettings raw;
+  raw.dering = false;
+  auto rawSet = bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0.0f), 0.01f), raw);
+  ASSERT_TRUE(rawSet.ok());
+  expectShNear(rawSet->sh[0], probe.sh, 1e-6f, "raw");
+}
+
+// A point light of intensity I at distance r: a delta of irradiance I / r^2 from its direction.
+TEST(ProbeBake, PointLightFollowsInverseSquare) {
+  World w;
+  w.scene.lights.push_back(test::pointLight(vec3(0, 2, 0), 8.0f));
+  w.build();
+  const ProbeSample probe = w.bakeOne(vec3(0, -2, 0), 64);
+  const float e = 8.0f / 16.0f;
+  EXPECT_NEAR(probe.sh.c[0].x, e * 0.282095f, 1e-6f);
+  EXPECT_NEAR(probe.sh.c[1].x, e * 0.488603f, 1e-6f);  // Y1-1 = 0.488603 y, s = +Y
+  EXPECT_NEAR(probe.sh.irradiance(vec3(0, 1, 0)).x, 1.0625f * e, 1e-5f);
+}
+
+// Inside a closed room whose walls emit Le from their (inward) front faces and reflect nothing,
+// every ray returns exactly Le: c0 = 2 sqrt(pi) Le, validity 1.
+TEST(ProbeBake, EmissiveRoomGivesItsRadiance) {
+  World w;
+  const vec3 le(0.2f, 0.4f, 0.8f);
+  const uint32_t m = addMaterial(w.scene, lambert(vec3(0.0f), le));
+  addBox(w.scene, "room", vec3(-2.0f), vec3(2.0f), m, /*inward=*/true);
+  w.build();
+  const ProbeSample probe = w.bakeOne(vec3(0.3f, -0.5f, 0.7f), 1024);
+  EXPECT_EQ(probe.validity, 1.0f);
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(probe.sh.c[0][c], 4.0 * kPiD * 0.282095 * le[c], 1e-6 * le[c]);
+}
+
+// ---- validity -------------------------------------------------------------------------------
+
+// Inside a solid block (faces pointing out) every ray first meets a back face: validity 0.
+// Outside it, rays meet front faces or nothing: validity 1. The invalid probe gets the mean SH
+// of the valid probes it shares a tetrahedron with.
+TEST(ProbeBake, ValidityFromBackFaces) {
+  World w;
+  w.scene.sky = Sky::constant(vec3(1.0f));
+  const uint32_t m = addMaterial(w.scene, lambert(vec3(0.5f)));
+  addBox(w.scene, "block", vec3(-1.0f), vec3(1.0f), m, /*inward=*/false);
+  w.build();
+  EXPECT_EQ(w.bakeOne(vec3(0.1f, 0.2f, 0.3f), 512).validity, 0.0f);
+  EXPECT_EQ(w.bakeOne(vec3(3.0f, 0.0f, 0.0f), 512).validity, 1.0f);
+
+  std::vector<vec3> positions = cubeCorners(vec3(0.0f), 3.0f);
+  positions.push_back(vec3(0.1f, 0.2f, 0.3f));  // probe 8, inside the block
+  ProbeBakeSettings settings;
+  settings.rays = 256;
+  settings.dering = false;
+  ProbeBakeReport report;
+  auto set = bakeProbes(w.scene, *w.tracer, positions, settings, nullptr, nullptr, &report);
+  ASSERT_TRUE(set.ok()) << set.error();
+  EXPECT_EQ(report.invalidProbes, std::vector<int32_t>{8});
+  EXPECT_EQ(report.filledProbes, 1);
+  EXPECT_EQ(set->validity[8], 0.0f);  // the raw value stays
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(set->validity[i], 1.0f) << i;
+  // The centre of a cube shares a tetrahedron with every corner in any Delaunay split that
+  // includes it; compute the expected mean from the cells.
+  std::vector<char> adjacent(9, 0);
+  for (int32_t c = 0; c < set->innerCellCount; ++c) {
+    bool has8 = false;
+    for (int k = 0; k < 4; ++k) has8 = has8 || set->cells[c][k] == 8;
+    if (!has8) continue;
+    for (int k = 0; k < 4; ++k) adjacent[set->cells[c][k]] = 1;
+  }
+  glm::dvec3 sum(0.0);
+  int n = 0;
+  for (int i = 0; i < 8; ++i)
+    if (adjacent[i]) sum += glm::dvec3(set->sh[i].c[0]), ++n;
+  ASSERT_GT(n, 0);
+  EXPECT_NEAR(set->sh[8].c[0].x, sum.x / n, 1e-5);
+  EXPECT_GT(set->sh[8].c[0].x, 0.5f);  // not the black inside of the block
+
+  settings.fillInvalid = false;
+  auto unfilled = bakeProbes(w.scene, *w.tracer, positions, settings);
+  ASSERT_TRUE(unfilled.ok());
+  EXPECT_EQ(unfilled->sh[8].c[0], vec3(0.0f));
+}
+
+// ---- light modes -----------------------------------------------------------------------------
+
+// Probes are for dynamic objects: a baked light gives direct and indirect light, a mixed
+// light only indirect (its direct light is real time), a realtime light nothing. With no
+// geometry there is no indirect light, so only the baked light shows.
+TEST(ProbeBake, LightModesAreRespected) {
+  for (LightMode mode : {LightMode::Baked, LightMode::Mixed, LightMode::Realtime}) {
+    World w;
+    Light l = test::directionalLight(vec3(0, -1, 0), 2.0f);
+    l.mode = mode;
+    w.scene.lights.push_back(l);
+    w.build();
+    const float c0 = w.bakeOne(vec3(0.0f), 64).sh.c[0].x;
+    EXPECT_NEAR(c0, mode == LightMode::Baked ? 2.0f * 0.282095f : 0.0f, 1e-6f);
+  }
+  // A mixed light's bounce off a floor is kept.
+  World w;
+  Light l = test::directionalLight(vec3(0, -1, 0), 2.0f);
+  l.mode = LightMode::Mixed;
+  w.scene.lights.push_back(l);
+  const uint32_t m = addMaterial(w.scene, lambert(vec3(0.5f)));
+  test::addQuad(w.scene, "floor", vec3(-50, 0, 50), vec3(50, 0, 50), vec3(50, 0, -50),
+                vec3(-50, 0, -50), m);
+  w.build();
+  const ProbeSample probe = w.bakeOne(vec3(0, 1, 0), 4096);
+  // The floor's radiance is albedo E / pi = 1/pi; it fills the lower hemisphere almost
+  // entirely, so the irradiance facing down is ~ pi x 1/pi = 1 (minus the L2 truncation).
+  EXPECT_NEAR(probe.sh.irradiance(vec3(0, -1, 0)).x, 1.0, 0.08);
+  EXPECT_GT(probe.sh.c[0].x, 0.0f);
+}
+
+// ---- determinism and control --------------------------------------------------------------------
+
+struct DeterminismScene : World {
+  DeterminismScene() {
+    scene.sky = Sky::constant(vec3(0.3f, 0.4f, 0.5f));
+    const uint32_t m = addMaterial(scene, lambert(vec3(0.7f, 0.5f, 0.3f)));
+    test::addQuad(scene, "floor", vec3(-5, 0, 5), vec3(5, 0, 5), vec3(5, 0, -5), vec3(-5, 0, -5),
+                  m);
+    addBox(scene, "block", vec3(-0.5f, 0.0f, -0.5f), vec3(0.5f, 1.0f, 0.5f), m, false);
+    Light l = test::pointLight(vec3(1, 3, 1), 20.0f);
+    l.shadowRadius = 0.3f;
+    l.shadowSamples = 4;
+    scene.lights.push_back(l);
+    build();
+  }
+};
+
+std::vector<uint8_t> bakeBytes(const World& w, int threads, uint64_t seed) {
+  std::vector<vec3> positions = cubeCorners(vec3(0.0f, 1.5f, 0.0f), 1.2f);
+  positions.push_back(vec3(0.2f, 1.6f, -0.1f));
+  positions.push_back(vec3(0.0f, 0.5f, 0.0f));  // inside the block
+  ProbeBakeSettings settings;
+  settings.rays = 512;
+  settings.threads = threads;
+  settings.seed = seed;
+  auto set = bakeProbes(w.scene, *w.tracer, positions, settings);
+  EXPECT_TRUE(set.ok()) << set.error();
+  return set.ok() ? serializeProbeSet(*set) : std::vector<uint8_t>{};
+}
+
+TEST(ProbeBake, BitIdenticalAcrossThreadCounts) {
+  DeterminismScene w;
+  const auto one = bakeBytes(w, 1, 5);
+  EXPECT_EQ(one, bakeBytes(w, 2, 5));
+  EXPECT_EQ(one, bakeBytes(w, 3, 5));
+  EXPECT_NE(one, bakeBytes(w, 2, 6));  // the seed keys the samples
+}
+
+TEST(ProbeBake, CancelledBakeReturnsAnError) {
+  DeterminismScene w;
+  std::atomic<bool> cancel{true};
+  auto set = bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0, 2, 0), 1.0f), {}, nullptr, &cancel);
+  ASSERT_FALSE(set.ok());
+  EXPECT_EQ(set.error(), "cancelled");
+}
+
+TEST(ProbeBake, RejectsBadInput) {
+  DeterminismScene w;
+  EXPECT_FALSE(bakeProbes(w.scene, *w.tracer, std::vector<vec3>{}, {}).ok());
+  ProbeBakeSettings zero;
+  zero.rays = 0;
+  EXPECT_FALSE(bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0.0f), 1.0f), zero).ok());
+  std::vector<vec3> bad = cubeCorners(vec3(0.0f), 1.0f);
+  bad[3].y = std::nanf("");
+  auto r = bakeProbes(w.scene, *w.tracer, bad, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().find("positions[3]"), std::string::npos) << r.error();
+}
+
+// Degenerate sets still bake (one probe: dimension 0, every query gets it).
+TEST(ProbeBake, SingleProbe) {
+  World w;
+  w.scene.sky = Sky::constant(vec3(1.0f));
+  w.build();
+  ProbeBakeSettings settings;
+  settings.rays = 64;
+  ProbeBakeReport report;
+  auto set = bakeProbes(w.scene, *w.tracer, std::vector<vec3>{vec3(1.0f)}, settings, nullptr,
+                        nullptr, &report);
+  ASSERT_TRUE(set.ok()) << set.error();
+  EXPECT_EQ(set->dimension, 0);
+  EXPECT_NEAR(sampleProbes(*set, vec3(9.0f)).c[0].x, 2.0 * std::sqrt(kPiD), 1e-5);
+}
+
+TEST(ProbeBake, IntegratorSettingsFromScene) {
+  Scene scene;
+  scene.settings.bounces = 3;
+  scene.settings.indirectIntensity = 0.5f;
+  ProbeBakeSettings s;
+  EXPECT_EQ(probeIntegratorSettings(scene, s).maxBounces, 3);
+  EXPECT_EQ(probeIntegratorSettings(scene, s).indirectIntensity, 0.5f);
+  s.bounces = 7;
+  EXPECT_EQ(probeIntegratorSettings(scene, s).maxBounces, 7);
+  EXPECT_EQ(probeIntegratorSettings(Scene{}, ProbeBakeSettings{}).maxBounces, kDefaultProbeBounces);
+}
+
+// ---- positions --------------------------------------------------------------------------------
+
+TEST(ProbePositions, ParsesAndNamesTheFaultyField) {
+  auto ok = parseProbePositions(R"({"positions": [[1, 2, 3], [4.5, -6, 7e-1]]})", "p.json");
+  ASSERT_TRUE(ok.ok()) << ok.error();
+  ASSERT_EQ(ok->size(), 2u);
+  EXPECT_EQ((*ok)[1], vec3(4.5f, -6.0f, 0.7f));
+  auto err = [](const char* text) { return parseProbePositions(text, "p.json").error(); };
+  EXPECT_EQ(err(R"({"positions": [[0,0,0],[0,0,0],[0,0,0],[1,2]]})"),
+            "p.json: positions[3]: expected 3 finite numbers");
+  EXPECT_EQ(err(R"({"positions": [[0,0,"a"]]})"),
+            "p.json: positions[0]: expected 3 finite numbers");
+  EXPECT_EQ(err(R"({"positions": [[0,0,null]]})"),
+            "p.json: positions[0]: expected 3 finite numbers");
+  EXPECT_EQ(err(R"({"points": []})").rfind("p.json: positions: missing", 0), 0u);
+  EXPECT_EQ(err(R"({"positions": 3})"), "p.json: positions: expected an array");
+  EXPECT_EQ(err("{"), "p.json: not valid JSON");
+  EXPECT_EQ(loadProbePositions("/nonexistent/p.json").error(), "/nonexistent/p.json: cannot open");
+}
+
+TEST(ProbePositions, SceneGroupsInOrder) {
+  Scene scene;
+  scene.probeGroups.push_back({"a", 0, {vec3(1.0f), vec3(2.0f)}});
+  scene.probeGroups.push_back({"b", 1, {vec3(3.0f)}});
+  EXPECT_EQ(sceneProbePositions(scene), (std::vector<vec3>{vec3(1.0f), vec3(2.0f), vec3(3.0f)}));
+}
+
+// ---- the CLI
+// --------------------------------------------------------------------------------------
+
+std::string kiln() { return std::string(test::kilnExe()) + " "; }
+
+TEST(ProbesCli, BakeQueryExport) {
+  const std::string scene = test::scenesDir() + "/cornell_box.gltf";
+  if (!std::filesystem::exists(scene)) GTEST_SKIP() << scene << " not generated";
+  const std::string dir = test::makeTempDir("kiln_probes_cli");
+  Json positions = {{"positions", Json::array()}};
+  for (const vec3& p : cubeCorners(vec3(0.28f, 0.43f, 0.28f), 0.07f))
+    positions["positions"].push_back({p.x, p.y, p.z});
+  test::writeTextFile(dir + "/pos.json", positions.dump());
+  const std::string out = dir + "/box.kprobe";
+  std::string log;
+  ASSERT_EQ(test::runCommand(kiln() + "probes bake " + scene + " --positions " + dir +
+                                 "/pos.json --out " + out + " --rays 256 --threads 2 --quiet",
+                             &log),
+            0)
+      << log;
+  EXPECT_EQ(log, "");  // --quiet, and no probe is inside geometry
+  auto set = loadProbeFile(out);
+  ASSERT_TRUE(set.ok()) << set.error();
+  EXPECT_EQ(set->probeCount(), 8);
+
+  // query --json: keys tet, probes, weights, sh, irradiance, consistent with the runtime.
+  ASSERT_EQ(test::runCommand(kiln() + "probes query " + out + " 0.3 0.45 0.3 0 -1 0 --json", &log),
+            0)
+      << log;
+  Json q = Json::parse(log);
+  const ProbeLocation loc = locateProbe(*set, vec3(0.3f, 0.45f, 0.3f));
+  EXPECT_EQ(q["tet"].get<int>(), loc.cell);
+  ASSERT_EQ(q["probes"].size(), 4u);
+  ASSERT_EQ(q["weights"].size(), 4u);
+  double wsum = 0;
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_EQ(q["probes"][k].get<int>(), loc.probes[k]);
+    wsum += q["weights"][k].get<double>();
+  }
+  EXPECT_NEAR(wsum, 1.0, 1e-6);
+  ASSERT_EQ(q["sh"].size(), 9u);
+  ASSERT_EQ(q["sh"][0].size(), 3u);
+  const vec3 e = probeIrradiance(interpolateProbes(*set, loc), vec3(0, -1, 0));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(q["irradiance"][c].get<double>(), e[c], 1e-6 * e[c]);
+
+  // Text form.
+  ASSERT_EQ(test::runCommand(kiln() + "probes query " + out + " 0.3 0.45 0.3", &log), 0) << log;
+  EXPECT_NE(log.find("irradiance E (not E/pi)"), std::string::npos) << log;
+
+  // export --json to a file.
+  ASSERT_EQ(
+      test::runCommand(kiln() + "probes export " + out + " --json --out " + dir + "/x.json", &log),
+      0)
+      << log;
+  Json x = Json::parse(test::readTextFile(dir + "/x.json"));
+  EXPECT_EQ(x["positions"].size(), 8u);
+  EXPECT_EQ(x["validity"].size(), 8u);
+  EXPECT_EQ(x["sh"].size(), 8u);
+  EXPECT_EQ(x["dimension"].get<int>(), 3);
+  EXPECT_EQ(x["cells"].size(), size_t(set->cellCount()));
+
+  // Bad input leaves the existing output untouched, and names the file.
+  const std::string before = test::readTextFile(out);
+  test::writeTextFile(dir + "/bad.json", R"({"positions": [[0, 0, 0], [1, 2]]})");
+  EXPECT_EQ(
+      test::runCommand(
+          kiln() + "probes bake " + scene + " --positions " + dir + "/bad.json --out " + out, &log),
+      1);
+  EXPECT_NE(log.find("bad.json: positions[1]: expected 3 finite numbers"), std::string::npos)
+      << log;
+  EXPECT_EQ(test::readTextFile(out), before);
+  // No positions at all: the scene has no probe groups.
+  EXPECT_EQ(test::runCommand(kiln() + "probes bake " + scene + " --out " + out, &log), 1);
+  EXPECT_NE(log.find("no probe positions"), std::string::npos) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes query " + dir + "/missing.kprobe 0 0 0", &log), 1);
+  EXPECT_NE(log.find("missing.kprobe"), std::string::npos) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes export " + dir + "/pos.json", &log), 1);
+  std::filesystem::remove_all(dir);
+}
+
+// Without --positions the scene's probe groups are used, in world space (node transform).
+TEST(ProbesCli, BakesTheScenesProbeGroups) {
+  const std::string dir = test::makeTempDir("kiln_probes_groups");
+  const Json doc = {
+      {"asset", {{"version", "2.0"}}},
+      {"extras", {{"kiln", {{"sky", {{"color", {1, 1, 1}}}}}}}},
+      {"nodes",
+       {{{"name", "probes"},
+         {"translation", {1, 0, 0}},
+         {"extras", {{"kiln", {{"probes", {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}}}}}}}},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"scene", 0}};
+  test::writeTextFile(dir + "/groups.gltf", doc.dump());
+  std::string log;
+  ASSERT_EQ(test::runCommand(kiln() + "probes bake " + dir + "/groups.gltf --out " + dir +
+                                 "/g.kprobe --rays 64 --backend cgal",
+                             &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("0 from the positions file, 4 from the scene's probe groups"),
+            std::string::npos)
+      << log;
+  auto set = loadProbeFile(dir + "/g.kprobe");
+  ASSERT_TRUE(set.ok()) << set.error();
+  ASSERT_EQ(set->probeCount(), 4);
+  EXPECT_EQ(set->positions[1], vec3(2, 0, 0));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ProbesCli, BadUsageExitsTwo) {
+  std::string log;
+  const std::string bake = kiln() + "probes bake scene.gltf --out x.kprobe ";
+  EXPECT_EQ(test::runCommand(bake + "--rays 0", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(bake + "--rays -4", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(bake + "--threads -1", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(bake + "--backend qhull", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes bake scene.gltf", &log), 2) << log;  // no --out
+  EXPECT_EQ(test::runCommand(kiln() + "probes query x.kprobe 1 2", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes query x.kprobe 1 2 3 0 0 0", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes", &log), 2) << log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes bake --help", &log), 0) << log;
+}
+
+}  // namespace
+}  // namespace kiln

@@ -1,0 +1,194 @@
+// probe_bench.cpp: light-probe lookups per second and tetrahedralization time.
+//
+// Lookups (kiln::locateProbe, Cupisz's walk) on N random probes in a 10 m cube:
+//   - Hinted: an object moving along a smooth closed path, each lookup starting from the
+//     previous one's cell (the per-object cache of Cupisz 2012);
+//   - Unhinted: uniformly random points, each walk starting from the seed grid;
+//   - CGAL: Delaunay_triangulation_3::locate on the same random points (no hint) and on the
+//     path (hinted with the previous cell), CGAL's own triangulation of the same probes;
+//   - BruteForce: a scan of every tetrahedron (barycentric test), the baseline a lookup
+//     structure must beat, on fewer probes.
+// Tetrahedralization: buildProbeTopology (Delaunay + outer cells + seed grid) with TetGen and
+// with CGAL for 1k, 10k and 100k random probes.
+// Each benchmark reports items_per_second (lookups, or probes tetrahedralized).
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <map>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "kiln/probe_runtime.h"
+#include "probes/tetrahedralize.h"
+
+namespace kiln {
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using CgalDelaunay = CGAL::Delaunay_triangulation_3<Kernel>;
+
+constexpr float kSide = 10.0f;        // probes fill [0, kSide]^3
+constexpr int kQueryCount = 1 << 14;  // lookups per benchmark iteration
+
+std::vector<glm::vec3> randomPoints(size_t n, uint32_t seed, float lo = 0.0f, float hi = kSide) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(lo, hi);
+  std::vector<glm::vec3> p(n);
+  for (auto& v : p) v = glm::vec3(u(rng), u(rng), u(rng));
+  return p;
+}
+
+// A smooth closed Lissajous path through the cube, kQueryCount steps (~3 mm each).
+std::vector<glm::vec3> pathPoints() {
+  std::vector<glm::vec3> p(kQueryCount);
+  for (int i = 0; i < kQueryCount; ++i) {
+    const float t = 2.0f * 3.14159265f * float(i) / float(kQueryCount);
+    p[i] = glm::vec3(0.5f * kSide) +
+           0.4f * kSide * glm::vec3(std::sin(t), std::sin(2.0f * t + 0.5f), std::cos(3.0f * t));
+  }
+  return p;
+}
+
+struct Fixture {
+  ProbeSet set;
+  std::unique_ptr<CgalDelaunay> cgal;
+};
+
+// One ProbeSet (TetGen) and one CGAL triangulation per probe count, built on first use.
+const Fixture& fixture(int probes) {
+  static std::map<int, std::unique_ptr<Fixture>> cache;
+  auto& slot = cache[probes];
+  if (!slot) {
+    slot = std::make_unique<Fixture>();
+    const std::vector<glm::vec3> positions = randomPoints(size_t(probes), 1);
+    slot->set = buildProbeTopology(positions).value();
+    slot->cgal = std::make_unique<CgalDelaunay>();
+    std::vector<Kernel::Point_3> pts;
+    for (const auto& p : positions) pts.emplace_back(p.x, p.y, p.z);
+    slot->cgal->insert(pts.begin(), pts.end());
+  }
+  return *slot;
+}
+
+void BM_LocateHinted(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  const std::vector<glm::vec3> path = pathPoints();
+  int32_t hint = -1;
+  size_t steps = 0;
+  for (auto _ : state) {
+    for (const glm::vec3& p : path) {
+      const ProbeLocation loc = locateProbe(f.set, p, hint);
+      hint = loc.cell;
+      steps += loc.steps;
+      benchmark::DoNotOptimize(loc);
+    }
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+  state.counters["cells_per_lookup"] =
+      double(steps) / double(int64_t(state.iterations()) * kQueryCount);
+}
+
+void BM_LocateUnhinted(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  const std::vector<glm::vec3> points = randomPoints(kQueryCount, 2);
+  size_t steps = 0;
+  for (auto _ : state) {
+    for (const glm::vec3& p : points) {
+      const ProbeLocation loc = locateProbe(f.set, p, -1);
+      steps += loc.steps;
+      benchmark::DoNotOptimize(loc);
+    }
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+  state.counters["cells_per_lookup"] =
+      double(steps) / double(int64_t(state.iterations()) * kQueryCount);
+}
+
+void BM_CgalLocateRandom(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  std::vector<Kernel::Point_3> points;
+  for (const auto& p : randomPoints(kQueryCount, 2)) points.emplace_back(p.x, p.y, p.z);
+  for (auto _ : state) {
+    for (const auto& p : points) benchmark::DoNotOptimize(f.cgal->locate(p));
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+}
+
+void BM_CgalLocateHinted(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  std::vector<Kernel::Point_3> points;
+  for (const auto& p : pathPoints()) points.emplace_back(p.x, p.y, p.z);
+  CgalDelaunay::Cell_handle hint;
+  for (auto _ : state) {
+    for (const auto& p : points) {
+      hint = f.cgal->locate(p, hint);
+      benchmark::DoNotOptimize(hint);
+    }
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+}
+
+// Scans every tetrahedron for the one whose barycentric coordinates are all >= 0.
+int32_t bruteForceLocate(const ProbeSet& s, glm::vec3 p) {
+  const glm::dvec3 q(p);
+  for (int32_t c = 0; c < s.innerCellCount; ++c) {
+    const glm::dvec3 a(s.positions[s.cells[c][0]]), b(s.positions[s.cells[c][1]]),
+        d(s.positions[s.cells[c][2]]), e(s.positions[s.cells[c][3]]);
+    const glm::dmat3 m(b - a, d - a, e - a);
+    const double det = glm::determinant(m);
+    if (det == 0.0) continue;
+    const glm::dvec3 l = glm::inverse(m) * (q - a);
+    if (l.x >= 0 && l.y >= 0 && l.z >= 0 && l.x + l.y + l.z <= 1) return c;
+  }
+  return -1;
+}
+
+void BM_LocateBruteForce(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  const std::vector<glm::vec3> points = randomPoints(1024, 2, 1.0f, kSide - 1.0f);
+  for (auto _ : state) {
+    for (const glm::vec3& p : points) benchmark::DoNotOptimize(bruteForceLocate(f.set, p));
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * int64_t(points.size()));
+}
+
+void BM_Tetrahedralize(benchmark::State& state) {
+  const std::vector<glm::vec3> positions = randomPoints(size_t(state.range(1)), 3);
+  ProbeTopologySettings settings;
+  settings.backend = state.range(0) == 0 ? DelaunayBackend::TetGen : DelaunayBackend::Cgal;
+  state.SetLabel(state.range(0) == 0 ? "tetgen" : "cgal");
+  for (auto _ : state) {
+    Result<ProbeSet> set = buildProbeTopology(positions, settings);
+    if (!set) {
+      state.SkipWithError(set.error().c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(set->cells.data());
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * state.range(1));
+}
+
+BENCHMARK(BM_LocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
+BENCHMARK(BM_LocateUnhinted)->Arg(1000)->Arg(10000)->Arg(100000);
+BENCHMARK(BM_CgalLocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
+BENCHMARK(BM_CgalLocateRandom)->Arg(1000)->Arg(10000)->Arg(100000);
+BENCHMARK(BM_LocateBruteForce)->Arg(1000);
+BENCHMARK(BM_Tetrahedralize)
+    ->ArgNames({"backend", "probes"})
+    ->Args({0, 1000})
+    ->Args({1, 1000})
+    ->Args({0, 10000})
+    ->Args({1, 10000})
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Tetrahedralize)
+    ->ArgNames({"backend", "probes"})
+    ->Args({0, 100000})
+    ->Args({1, 100000})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace kiln

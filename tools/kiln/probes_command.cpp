@@ -1,0 +1,335 @@
+// probes_command.cpp: `kiln probes bake | query | export`, the light-probe SH bake and the
+// tools to look inside a .kprobe file. Thin over probes/probe_baker.h (bake) and kiln_runtime
+// (query, export). Usage and formats: docs/probes.md.
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "kiln/probe_runtime.h"
+#include "kiln/probe_set.h"
+#include "probes/probe_baker.h"
+#include "src/progress.h"
+#include "src/tracer.h"
+#include "tools/kiln/cli_common.h"
+
+namespace kiln::cli {
+namespace {
+
+using Json = nlohmann::json;
+
+// A float as the double with the shortest decimal form that reads back as the same float, so
+// JSON shows 0.3 rather than 0.30000001192092896.
+double shortest(float v) {
+  if (!std::isfinite(v)) return double(v);
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::strtod(std::string(buf, r.ptr).c_str(), nullptr);
+}
+
+Json vecJson(glm::vec3 v) { return Json::array({shortest(v.x), shortest(v.y), shortest(v.z)}); }
+
+Json shJson(const ShL2Rgb& sh) {
+  Json j = Json::array();
+  for (const glm::vec3& c : sh.c) j.push_back(vecJson(c));
+  return j;
+}
+
+// Writes `text` to `path` through a temporary file and a rename, so a failure never leaves
+// a half-written file.
+Status writeTextAtomically(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return Error{path + ": cannot open for writing"};
+    out << text;
+    out.close();
+    if (!out) {
+      std::remove(tmp.c_str());
+      return Error{path + ": write failed"};
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    return Error{path + ": " + ec.message()};
+  }
+  return Status::success();
+}
+
+// ---- bake ----------------------------------------------------------------------------------
+
+struct BakeOptions {
+  std::string scene;
+  std::string positions;
+  std::string out;
+  int rays = 16384;
+  uint64_t seed = 0;
+  std::string backend = "tetgen";
+  int bounces = -1;  // -1 = the scene's extras.kiln.bounces, else kDefaultProbeBounces
+  int threads = 0;
+  bool noDering = false;
+  bool noSceneProbes = false;
+  bool quiet = false;
+};
+
+int runBake(const BakeOptions& o) {
+  Scene scene;
+  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+
+  std::vector<vec3> positions;
+  if (!o.positions.empty()) {
+    Result<std::vector<vec3>> loaded = loadProbePositions(o.positions);
+    if (!loaded) {
+      printError(loaded.error());
+      return kExitBadInput;
+    }
+    positions = std::move(loaded).value();
+  }
+  const size_t fromFile = positions.size();
+  if (!o.noSceneProbes) {
+    const std::vector<vec3> groups = sceneProbePositions(scene);
+    positions.insert(positions.end(), groups.begin(), groups.end());
+  }
+  if (positions.empty()) {
+    printError(scene.path +
+               ": no probe positions (the scene has no probe groups, extras.kiln.probes; "
+               "give --positions FILE)");
+    return kExitBadInput;
+  }
+
+  Result<std::unique_ptr<Tracer>> tracer = Tracer::create(scene);
+  if (!tracer) {
+    printError(scene.path + ": " + tracer.error());
+    return kExitBadInput;
+  }
+
+  ProbeBakeSettings settings;
+  settings.rays = uint32_t(o.rays);
+  settings.seed = o.seed;
+  settings.topology.backend = o.backend == "cgal" ? DelaunayBackend::Cgal : DelaunayBackend::TetGen;
+  if (o.bounces >= 0) settings.bounces = o.bounces;
+  settings.threads = o.threads;
+  settings.dering = !o.noDering;
+
+  if (!o.quiet) {
+    std::cerr << "kiln: baking " << positions.size() << " probes (" << fromFile
+              << " from the positions file, " << positions.size() - fromFile
+              << " from the scene's probe groups), " << o.rays << " rays each\n";
+  }
+  installInterruptHandler();
+  Progress progress("probes", positions.size(), "probes", !o.quiet);
+  ProbeBakeReport report;
+  const auto start = std::chrono::steady_clock::now();
+  Result<ProbeSet> set =
+      bakeProbes(scene, **tracer, positions, settings, &progress, &cancelFlag(), &report);
+  if (!set) {
+    if (cancelFlag().load()) {
+      printError("interrupted; " + o.out + " left untouched");
+    } else {
+      printError(scene.path + ": " + set.error());
+    }
+    return kExitBadInput;
+  }
+  for (const std::string& w : report.warnings) printWarning(w);
+  if (Status s = writeProbeFile(*set, o.out); !s) {
+    printError(s.error());
+    return kExitBadInput;
+  }
+  if (!o.quiet) {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::cerr << "kiln: wrote " << o.out << ": " << set->probeCount() << " probes, "
+              << set->cellCount() << " cells (dimension " << set->dimension << "), "
+              << report.invalidProbes.size() << " invalid, " << report.deringedProbes
+              << " deringed, " << report.integrator.maxBounces << " bounces, " << report.rays
+              << " rays in " << seconds << " s\n";
+  }
+  return kExitOk;
+}
+
+// ---- query ---------------------------------------------------------------------------------
+
+struct QueryOptions {
+  std::string file;
+  std::vector<double> coords;  // x y z [nx ny nz]
+  bool json = false;
+};
+
+int runQuery(const QueryOptions& o) {
+  if (o.coords.size() != 3 && o.coords.size() != 6) {
+    printError("probes query: expected X Y Z or X Y Z NX NY NZ (" +
+               std::to_string(o.coords.size()) + " numbers given)");
+    return kExitBadUsage;
+  }
+  const glm::vec3 p(o.coords[0], o.coords[1], o.coords[2]);
+  glm::vec3 n(0.0f, 1.0f, 0.0f);  // up (glTF +Y) when no normal is given
+  if (o.coords.size() == 6) n = glm::vec3(o.coords[3], o.coords[4], o.coords[5]);
+  const float len = glm::length(n);
+  if (!std::isfinite(p.x + p.y + p.z) || !(len > 0.0f) || !std::isfinite(len)) {
+    printError("probes query: the point must be finite and the normal finite and non-zero");
+    return kExitBadUsage;
+  }
+  n /= len;
+  Result<ProbeSet> set = loadProbeFile(o.file);
+  if (!set) {
+    printError(set.error());
+    return kExitBadInput;
+  }
+  const ProbeLocation loc = locateProbe(*set, p);
+  const ShL2Rgb sh = interpolateProbes(*set, loc);
+  const glm::vec3 e = probeIrradiance(sh, n);
+  const bool outer = loc.cell >= 0 && set->isOuter(loc.cell);
+  if (o.json) {
+    Json j;
+    j["point"] = vecJson(p);
+    j["normal"] = vecJson(n);
+    j["tet"] = loc.cell;
+    j["outer"] = outer;
+    j["probes"] = loc.probes;
+    j["weights"] = Json::array();
+    for (float w : loc.weights) j["weights"].push_back(shortest(w));
+    j["sh"] = shJson(sh);
+    j["irradiance"] = vecJson(e);
+    std::cout << j.dump(2) << "\n";
+    return kExitOk;
+  }
+  std::printf("point (%g, %g, %g)\n", p.x, p.y, p.z);
+  std::printf("tet %d (%s)\n", loc.cell, outer ? "outer cell, extrapolated" : "inside the hull");
+  std::printf("probes %d %d %d %d\n", loc.probes[0], loc.probes[1], loc.probes[2], loc.probes[3]);
+  std::printf("weights %.6g %.6g %.6g %.6g\n", loc.weights[0], loc.weights[1], loc.weights[2],
+              loc.weights[3]);
+  std::printf("sh (radiance, W/(m^2 sr), r g b per coefficient):\n");
+  static const char* kNames[kShL2Count] = {"Y00",  "Y1-1", "Y10", "Y11", "Y2-2",
+                                           "Y2-1", "Y20",  "Y21", "Y22"};
+  for (int i = 0; i < kShL2Count; ++i)
+    std::printf("  %-4s %.6g %.6g %.6g\n", kNames[i], sh.c[i].x, sh.c[i].y, sh.c[i].z);
+  std::printf("irradiance E (not E/pi) for normal (%g, %g, %g): %.6g %.6g %.6g\n", n.x, n.y, n.z,
+              e.x, e.y, e.z);
+  return kExitOk;
+}
+
+// ---- export --------------------------------------------------------------------------------
+
+struct ExportOptions {
+  std::string file;
+  std::string out;
+  bool json = false;
+};
+
+Json exportJson(const ProbeSet& s) {
+  Json j;
+  j["version"] = kProbeFileVersion;
+  j["dimension"] = s.dimension;
+  j["probeCount"] = s.probeCount();
+  j["cellCount"] = s.cellCount();
+  j["innerCellCount"] = s.innerCellCount;
+  j["shConvention"] =
+      "radiance SH, real orthonormal basis Y00 Y1-1 Y10 Y11 Y2-2 Y2-1 Y20 Y21 Y22 in glTF world "
+      "axes; irradiance E(n) = sum A_l c_i Y_i(n), A = pi, 2pi/3, pi/4";
+  Json positions = Json::array(), validity = Json::array(), sh = Json::array();
+  for (int32_t i = 0; i < s.probeCount(); ++i) {
+    positions.push_back(vecJson(s.positions[i]));
+    validity.push_back(shortest(s.validity[i]));
+    sh.push_back(shJson(s.sh[i]));
+  }
+  j["positions"] = std::move(positions);
+  j["validity"] = std::move(validity);
+  j["sh"] = std::move(sh);
+  Json cells = Json::array();
+  for (const glm::ivec4& c : s.cells) cells.push_back({c[0], c[1], c[2], c[3]});
+  j["cells"] = std::move(cells);
+  return j;
+}
+
+int runExport(const ExportOptions& o) {
+  Result<ProbeSet> set = loadProbeFile(o.file);
+  if (!set) {
+    printError(set.error());
+    return kExitBadInput;
+  }
+  const std::string text = exportJson(*set).dump(2) + "\n";
+  if (o.out.empty()) {
+    std::cout << text;
+    return kExitOk;
+  }
+  if (Status s = writeTextAtomically(o.out, text); !s) {
+    printError(s.error());
+    return kExitBadInput;
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+// `kiln probes lppv` (probes_lppv_command.cpp) registers on the "probes" command made here.
+void registerProbesLppvCommand(CLI::App& probes);
+
+void registerProbesCommand(CLI::App& app) {
+  // Other probe subcommands (place, lppv) may register on the same "probes" command.
+  CLI::App* probes = nullptr;
+  try {
+    probes = app.get_subcommand("probes");
+  } catch (const CLI::OptionNotFound&) {
+    probes = app.add_subcommand("probes", "Light probes: bake, query and export .kprobe files");
+    probes->require_subcommand(1);
+  }
+
+  auto bake = std::make_shared<BakeOptions>();
+  CLI::App* b = probes->add_subcommand(
+      "bake", "Bake L2 radiance SH light probes at given positions into a .kprobe file");
+  b->add_option("scene", bake->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--positions", bake->positions,
+                "JSON file {\"positions\": [[x, y, z], ...]} (world space, metres); the scene's "
+                "probe groups (extras.kiln.probes) are added unless --no-scene-probes");
+  b->add_option("--out,-o", bake->out, "Output .kprobe file (written atomically)")->required();
+  b->add_option("--rays", bake->rays, "Rays per probe (a power of two is best)")
+      ->check(CLI::Range(1, 1 << 30))
+      ->capture_default_str();
+  b->add_option("--seed", bake->seed, "Seed of every random number")->capture_default_str();
+  b->add_option("--backend", bake->backend, "Tetrahedralization backend")
+      ->check(CLI::IsMember({"tetgen", "cgal"}))
+      ->capture_default_str();
+  b->add_option("--bounces", bake->bounces,
+                "Indirect bounces (default: the scene's extras.kiln.bounces, else " +
+                    std::to_string(kDefaultProbeBounces) + ")")
+      ->check(CLI::Range(0, 1024));
+  b->add_option("--threads", bake->threads, "Worker threads (0 = all cores)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  b->add_flag("--no-dering", bake->noDering,
+              "Keep the raw SH even where its irradiance goes negative");
+  b->add_flag("--no-scene-probes", bake->noSceneProbes,
+              "Ignore the scene's probe groups (use only --positions)");
+  b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
+  b->callback(commandCallback([bake]() { return runBake(*bake); }));
+
+  auto query = std::make_shared<QueryOptions>();
+  CLI::App* q = probes->add_subcommand(
+      "query", "Locate a point in a .kprobe file: cell, probes, weights, SH and irradiance");
+  q->add_option("file", query->file, ".kprobe file")->required();
+  q->add_option("coords", query->coords, "X Y Z [NX NY NZ]: point and optional normal (+Y)")
+      ->required()
+      ->expected(3, 6);
+  q->add_flag("--json", query->json,
+              "Print JSON with keys tet, probes, weights, sh (9 x [r, g, b]), irradiance");
+  q->callback(commandCallback([query]() { return runQuery(*query); }));
+
+  auto exp = std::make_shared<ExportOptions>();
+  CLI::App* e = probes->add_subcommand("export", "Print a .kprobe file as JSON, for people");
+  e->add_option("file", exp->file, ".kprobe file")->required();
+  e->add_flag("--json", exp->json, "JSON output (the only format; accepted for clarity)");
+  e->add_option("--out,-o", exp->out, "Write to this file instead of stdout");
+  e->callback(commandCallback([exp]() { return runExport(*exp); }));
+
+  registerProbesLppvCommand(*probes);
+}
+
+}  // namespace kiln::cli
