@@ -14,11 +14,18 @@
 //     when all its points are (then filled from valid neighbours).
 //   - Post order: denoise (valid texels only), then fill invalid texels from the denoised
 //     values (so filled texels inherit no noise), dilate into padding, stitch seams.
+//   - Mixed lighting: the integrator's directLights / indirectLights come from
+//     planLightModes (src/light_modes.h). Shadowmask channels hold the visibility of the
+//     channel's light at the texel's points (Integrator::lightVisibility, the same shadow
+//     rays as direct light: soft shadows over the texel's samples); directions come from
+//     the same estimate as the light (Integrator::irradiance's weightedDirection).
 #include "lightmap/lightmap_baker.h"
 
+#include <array>
 #include <chrono>
 #include <cmath>
 
+#include "lightmap/directional.h"
 #include "lightmap/postprocess.h"
 #include "lightmap/seams.h"
 #include "lightmap/texel_raster.h"
@@ -31,6 +38,7 @@ namespace kiln {
 namespace {
 
 constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
+constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
 // Light batches per texel: the spread of batch means estimates each texel's variance for
 // the denoiser (the batches together are exactly the full estimate).
 constexpr uint32_t kVarianceBatches = 4;
@@ -70,6 +78,10 @@ Status validate(const LightmapBakeSettings& s) {
     return bad("aoMaxDistance must be > 0 (got " + std::to_string(s.aoMaxDistance) + ")");
   if (s.ambientOcclusion && !(s.aoAmount >= 0.0f && s.aoAmount <= 1.0f))
     return bad("aoAmount must be in [0, 1] (got " + std::to_string(s.aoAmount) + ")");
+  for (int c = 0; c < 3; ++c)
+    if (!(s.shadowColor[c] >= 0.0f) || !std::isfinite(s.shadowColor[c]))
+      return bad("shadowColor components must be finite and >= 0 (got " +
+                 std::to_string(s.shadowColor[c]) + ")");
   return Status::success();
 }
 
@@ -167,8 +179,28 @@ struct TexelLight {
   vec3 value{0.0f};       // E / pi over the texel's valid points
   float variance = 0.0f;  // of the luminance of `value` (from batch means)
   float ao = 1.0f;
+  vec4 shadowmask{1.0f};  // per channel: visible fraction of that channel's light
+  vec4 direction{0.5f, 0.5f, 0.5f, 0.5f};  // encodeDominantDirection
   bool valid = false;
 };
+
+// Per shadowmask channel, the scene lights that hold it (lights in one channel never
+// overlap, so at most one reaches a given point).
+using ChannelLights = std::array<std::vector<uint32_t>, kShadowmaskChannels>;
+
+ChannelLights channelLights(const LightModePlan& plan) {
+  ChannelLights lights;
+  for (uint32_t i = 0; i < plan.shadowmaskChannel.size(); ++i)
+    if (plan.shadowmaskChannel[i] >= 0) lights[size_t(plan.shadowmaskChannel[i])].push_back(i);
+  return lights;
+}
+
+// The influence test of light_modes.h's colouring: a point/spot light with a range reaches
+// only the inside of its range sphere.
+bool lightReaches(const Light& light, vec3 p) {
+  if (light.type == LightType::Directional || !(light.range > 0.0f)) return true;
+  return glm::length(p - light.position) < light.range;
+}
 
 struct LightSettings {
   uint32_t samples = 1;
@@ -178,6 +210,8 @@ struct LightSettings {
   bool ambientOcclusion = false;
   float aoMaxDistance = 1.0f;
   float aoAmount = 1.0f;
+  bool directional = false;
+  const ChannelLights* shadowmask = nullptr;  // null: no shadowmask
 };
 
 // Stage 5, one texel: samples split evenly over its points (point i takes indices
@@ -190,6 +224,9 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
   uint32_t used = 0;
   double aoOccluded = 0.0;
   std::vector<std::pair<double, uint32_t>> batches;  // (luminance of batch mean, size)
+  glm::dvec3 directionSum(0.0);  // luminance-weighted directions x sample count
+  vec3 normalSum(0.0f);
+  glm::dvec4 visibilitySum(0.0);  // per channel, x sample count
   for (uint32_t i = 0; i < pointCount; ++i) {
     const uint32_t first = uint32_t(uint64_t(i) * s.samples / pointCount);
     const uint32_t count = uint32_t(uint64_t(i + 1) * s.samples / pointCount) - first;
@@ -199,12 +236,17 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     const uint32_t nb = std::min(kVarianceBatches, count);
     glm::dvec3 pointSum(0.0);
     const size_t batchStart = batches.size();
+    glm::dvec3 pointDirection(0.0);
     for (uint32_t b = 0; b < nb; ++b) {
       const uint32_t bFirst = first + b * count / nb;
       const uint32_t bCount = first + (b + 1) * count / nb - bFirst;
-      const vec3 e =
-          integrator.irradiance(p.position, p.normal, key, bFirst, bCount, &backFaces).total();
+      vec3 direction(0.0f);
+      const vec3 e = integrator
+                         .irradiance(p.position, p.normal, key, bFirst, bCount, &backFaces,
+                                     s.directional ? &direction : nullptr)
+                         .total();
       pointSum += glm::dvec3(e) * double(bCount);
+      pointDirection += glm::dvec3(direction) * double(bCount);
       batches.push_back({double(luminance(e)) * kInvPi, bCount});
     }
     if (float(backFaces) > s.backfaceTolerance * float(count)) {
@@ -213,6 +255,34 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     }
     sum += pointSum;
     used += count;
+    directionSum += pointDirection;
+    normalSum += p.normal;
+    if (s.shadowmask) {
+      // Each channel: the visibility of the one light of that channel reaching p, averaged
+      // over the point's samples when the light's shadows are soft (one evaluation when
+      // hard: every sample would trace the same ray).
+      const uint64_t smKey = hashValues(key, kShadowmaskTag);
+      const Scene& scene = integrator.scene();
+      for (int c = 0; c < kShadowmaskChannels; ++c) {
+        double v = double(count);  // unreached: unshadowed
+        for (uint32_t light : (*s.shadowmask)[size_t(c)]) {
+          const Light& l = scene.lights[light];
+          if (!lightReaches(l, p.position)) continue;
+          const bool soft = l.type == LightType::Directional ? l.shadowAngle > 0.0f
+                                                             : l.shadowRadius > 0.0f;
+          if (!soft) {
+            v = double(count) *
+                luminance(integrator.lightVisibility(p.position, p.normal, light, smKey, 0));
+          } else {
+            v = 0.0;
+            for (uint32_t j = first; j < first + count; ++j)
+              v += luminance(integrator.lightVisibility(p.position, p.normal, light, smKey, j));
+          }
+          break;
+        }
+        visibilitySum[c] += v;
+      }
+    }
     if (s.ambientOcclusion) {
       // Cosine-weighted rays of length aoMaxDistance; the fraction that hits anything.
       const Frame frame = Frame::fromNormal(p.normal);
@@ -230,6 +300,13 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
   if (used == 0) return out;
   out.valid = true;
   out.value = vec3(sum / double(used)) * kInvPi;
+  if (s.shadowmask) out.shadowmask = glm::clamp(vec4(visibilitySum / double(used)), 0.0f, 1.0f);
+  if (s.directional) {
+    const float len = glm::length(normalSum);
+    const vec3 n = len > 0.0f ? normalSum / len : vec3(0.0f);
+    out.direction = encodeDominantDirection(vec3(directionSum / double(used)),
+                                            luminance(vec3(sum / double(used))), n);
+  }
   if (s.ambientOcclusion) out.ao = 1.0f - s.aoAmount * float(aoOccluded / double(used));
   // Variance of the mean from the spread of the batch means (batches of near-equal size).
   if (batches.size() >= 2) {
@@ -274,7 +351,8 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
 void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
               const RasterPage& raster, const std::vector<TexelRef>& texels,
               const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
-              const ParallelOptions& parallel, LightmapPageResult& result) {
+              bool withShadowmask, const ParallelOptions& parallel,
+              LightmapPageResult& result) {
   const int w = raster.width, h = raster.height;
   const size_t n = size_t(w) * size_t(h);
   LightmapPage page;
@@ -286,6 +364,8 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   page.variance.assign(n, 0.0f);
   page.texelWorldSize.assign(n, 0.0f);
   Image ao = settings.ambientOcclusion ? Image(w, h, 1) : Image();
+  Image shadowmask = withShadowmask ? Image(w, h, 4) : Image();
+  Image direction = settings.directional ? Image(w, h, 4) : Image();
   for (size_t i = 0; i < texels.size(); ++i) {
     if (texels[i].page != pageIndex) continue;
     const size_t t = texels[i].index;
@@ -300,6 +380,10 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
       page.position.pixels[3 * t + c] = texel.sample.position[c];
     }
     if (!ao.empty()) ao.pixels[t] = light[i].ao;
+    for (int c = 0; c < 4; ++c) {
+      if (!shadowmask.empty()) shadowmask.pixels[4 * t + c] = light[i].shadowmask[c];
+      if (!direction.empty()) direction.pixels[4 * t + c] = light[i].direction[c];
+    }
   }
   result.valid = page.valid;
   result.position = page.position;
@@ -313,14 +397,32 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   // Rings enough to cover the gutters between objects (2 x padding) and between charts.
   const int rings = std::max(2, 2 * settings.padding);
   const std::vector<uint8_t> mask = dilate(page.radiance, filled, rings, parallel);
-  if (settings.stitchSeams) {
+  auto stitch = [&](Image& image, const std::vector<uint8_t>& imageMask) {
+    if (!settings.stitchSeams) return;
     for (size_t o = 0; o < scene.objects.size(); ++o) {
       if (layout.objects[o].lightmapIndex != int(pageIndex)) continue;
       const auto seams = findSeams(scene.objects[o], layout.objects[o].scaleOffset, w, h);
-      if (!seams.empty()) (void)stitchSeams(page.radiance, mask, seams);
+      if (!seams.empty()) (void)stitchSeams(image, imageMask, seams);
     }
-  }
+  };
+  stitch(page.radiance, mask);
   result.light = std::move(page.radiance);
+
+  // Shadowmask and direction maps: no denoising (see lightmap_baker.h), the same fill,
+  // dilation and stitching as the light, so that bilinear lookups at chart borders and
+  // seams read the same texels in every map. Unset texels start unshadowed / undirected.
+  for (Image* image : {&shadowmask, &direction}) {
+    if (image->empty()) continue;
+    for (size_t t = 0; t < n; ++t)
+      if (!page.valid[t])
+        for (int c = 0; c < 4; ++c)
+          image->pixels[4 * t + c] = image == &shadowmask ? 1.0f : 0.5f;
+    const std::vector<uint8_t> f = fillInvalid(*image, page.valid, page.objectId, fill);
+    const std::vector<uint8_t> m = dilate(*image, f, rings, parallel);
+    stitch(*image, m);
+  }
+  result.shadowmask = std::move(shadowmask);
+  result.direction = std::move(direction);
 
   if (!ao.empty()) {
     if (settings.denoise) {
@@ -410,7 +512,14 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
     return Error{"cancelled"};
 
   // Stage 5: light.
+  result.lightModes = planLightModes(result.scene, settings.lightingMode);
+  for (const std::string& w : result.lightModes.warnings) result.warnings.push_back(w);
+  const ChannelLights shadowmaskLights = channelLights(result.lightModes);
+  bool withShadowmask = false;
+  for (int c : result.lightModes.shadowmaskChannel) withShadowmask |= c >= 0;
   IntegratorSettings is;
+  is.directLights = result.lightModes.bakeDirect;
+  is.indirectLights = result.lightModes.bakeIndirect;
   is.maxBounces = settings.bounces;
   is.albedoBoost = settings.albedoBoost;
   is.indirectIntensity = settings.indirectIntensity;
@@ -423,6 +532,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.ambientOcclusion = settings.ambientOcclusion;
   ls.aoMaxDistance = settings.aoMaxDistance;
   ls.aoAmount = settings.aoAmount;
+  ls.directional = settings.directional;
+  ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
   std::vector<TexelLight> light;
   const auto start = std::chrono::steady_clock::now();
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
@@ -434,8 +545,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());
   for (uint32_t p = 0; p < pages.size(); ++p) {
-    postPage(result.scene, result.layout, p, pages[p], texels, light, settings, parallel,
-             result.pages[p]);
+    postPage(result.scene, result.layout, p, pages[p], texels, light, settings, withShadowmask,
+             parallel, result.pages[p]);
     if (cancelled(cancel)) return Error{"cancelled"};
   }
 

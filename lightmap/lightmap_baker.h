@@ -8,7 +8,9 @@
 //   4. sample points pushed out of nearby geometry (walls meeting floors neither leak nor
 //      self-shadow);
 //   5. light: the integrator's irradiance at every sample point; texel value = E / pi;
-//      validity from the share of back-face hits; optional ambient occlusion;
+//      validity from the share of back-face hits; optional ambient occlusion; what each
+//      light contributes follows the lighting mode (src/light_modes.h); optionally the
+//      dominant direction (lightmap/directional.h) and the mixed lights' shadowmask;
 //   6. post: invalid texels filled, denoised, dilated into padding, seams stitched
 //      (postprocess.h, seams.h).
 // Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
@@ -22,6 +24,7 @@
 #include "lightmap/atlas.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/image.h"
+#include "src/light_modes.h"
 #include "src/progress.h"
 #include "src/result.h"
 #include "src/scene.h"
@@ -51,6 +54,14 @@ struct LightmapBakeSettings {
   bool ambientOcclusion = false;
   float aoMaxDistance = 1.0f;
   float aoAmount = 1.0f;
+  // Mixed lighting (docs/mixed_lighting.md): what mixed lights bake (src/light_modes.h).
+  // Realtime lights are never baked; baked lights always fully.
+  LightingMode lightingMode = LightingMode::BakedIndirect;
+  // Subtractive: the colour realtime shadows are clamped to (lightmap units, E / pi).
+  // Recorded in the manifest only. Unity's default Realtime Shadow Color.
+  vec3 shadowColor{0.42f, 0.478f, 0.627f};
+  // Directional mode: also bake the dominant direction map (lightmap/directional.h).
+  bool directional = false;
   // Post.
   bool denoise = true;
   bool stitchSeams = true;
@@ -70,6 +81,16 @@ Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& sett
 struct LightmapPageResult {
   Image light;                 // RGB, E / pi, glTF orientation (row 0 = v 0)
   Image ambientOcclusion;      // 1 channel when settings.ambientOcclusion, else empty
+  // RGBA, present when some light has a shadowmask channel (Shadowmask mode): channel c holds
+  // the visible fraction (0 = fully shadowed, 1 = unshadowed; soft shadows give fractions)
+  // of the mixed light of channel c whose influence (range sphere) holds the texel; 1 where
+  // no light of that channel reaches and in unused channels. Filled, dilated and stitched
+  // like `light`; not denoised (hard-shadow masks are exact, soft ones average many rays).
+  Image shadowmask;
+  // RGBA, present when settings.directional: RGB = dominant direction D x 0.5 + 0.5 (world,
+  // glTF axes, |D| = directionality), A = rebalancing coefficient dot(n, D) x 0.5 + 0.5
+  // (lightmap/directional.h). Filled, dilated and stitched like `light`; not denoised.
+  Image direction;
   std::vector<uint8_t> valid;  // per texel: 1 = baked and valid, 0 = padding/filled
   // W x H x 3: world position of each covered texel's main sample point after push-out
   // (the point whose light the texel holds when supersampling is 1); 0 for padding. For
@@ -93,7 +114,9 @@ struct LightmapBakeResult {
   std::vector<std::optional<UnwrapResult>> unwraps;
   AtlasLayout layout;
   std::vector<LightmapPageResult> pages;  // one per layout.pages entry
-  std::vector<std::string> warnings;
+  // What each scene light contributed, and its shadowmask channel (settings.lightingMode).
+  LightModePlan lightModes;
+  std::vector<std::string> warnings;  // includes lightModes.warnings
   LightmapBakeStats stats;
 };
 

@@ -8,6 +8,7 @@
 // all were written, so a failed or cancelled bake leaves earlier outputs intact.
 #pragma once
 
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 #include "lightmap/lightmap_baker.h"
@@ -20,7 +21,20 @@ enum class LdrEncoding { None, Rgbm, Dldr };
 struct LightmapOutputSettings {
   std::string outDir;
   LdrEncoding ldr = LdrEncoding::None;
+  // Recorded in the manifest's "settings" (not used otherwise).
+  std::string preset;       // quality preset applied, empty when none
+  std::string kilnVersion;  // e.g. "0.1.0"
+  std::string lockAtlas;    // the --lock-atlas manifest, empty when the atlas was packed
+  bool writeGltf = true;    // false: no output glTF (the manifest alone places the lightmaps)
 };
+
+// File names inside the output directory.
+std::string lightmapFileName(int page, const char* kind);  // "lightmap-<page>_<kind>.exr"
+inline constexpr const char* kManifestFileName = "manifest.json";
+
+// The manifest's "settings" object for `settings` and `output`.
+nlohmann::json lightmapSettingsJson(const LightmapBakeSettings& settings,
+                                    const LightmapOutputSettings& output);
 
 // Writes the outputs of `result`, baked from the glTF file `scenePath` with `settings`
 // (recorded in the manifest).

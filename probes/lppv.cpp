@@ -198,8 +198,12 @@ Image lppvUnityL1Image(const LppvVolume& v, ShAxes axes) {
       for (int i = 0; i < nx; ++i) {
         const int x = axes == ShAxes::kUnity ? nx - 1 - i : i;
         const UnityShL1 p = packUnityShL1(v.sh[v.cellIndex(x, y, z)], axes);
+        // Probe occlusion per shadowmask channel (what Unity's 4th block holds).
         const int row = z * ny + y;
-        const glm::vec4 blocks[4] = {p.shAr, p.shAg, p.shAb, glm::vec4(1.0f)};
+        const size_t cell = v.cellIndex(x, y, z);
+        const glm::vec4 occlusion =
+            v.occlusion.size() == v.cellCount() ? v.occlusion[cell] : glm::vec4(1.0f);
+        const glm::vec4 blocks[4] = {p.shAr, p.shAg, p.shAb, occlusion};
         for (int b = 0; b < 4; ++b) {
           float* px = image.at(b * nx + i, row);
           for (int c = 0; c < 4; ++c) px[c] = blocks[b][c];
@@ -242,12 +246,15 @@ Result<LppvOutputFiles> writeLppvOutputs(const LppvVolume& volume, const std::st
                             ? "min + i (max - min) / (n - 1) per axis (the centre when n = 1)"
                             : "min + (i + 0.5) (max - min) / n per axis";
   j["files"] = {{"l2", fileName(files.volume)}, {"unityL1", fileName(files.unityL1)}};
-  j["l2"] = {{"format", "klppv version 1 (little-endian; see docs/lppv.md)"},
-             {"cellOrder", "x fastest, then y, then z"},
-             {"sh",
-              "radiance SH, 9 coefficients x RGB, real orthonormal basis, glTF world axes; "
-              "irradiance E(n) = sum A_l c_i Y_i(n), A = (pi, 2pi/3, pi/4)"},
-             {"validity", "per cell, blended probe validity in [0, 1]"}};
+  j["l2"] = {
+      {"format",
+       "klppv version " + std::to_string(kLppvFileVersion) + " (little-endian; see docs/lppv.md)"},
+      {"cellOrder", "x fastest, then y, then z"},
+      {"sh",
+       "radiance SH, 9 coefficients x RGB, real orthonormal basis, glTF world axes; "
+       "irradiance E(n) = sum A_l c_i Y_i(n), A = (pi, 2pi/3, pi/4)"},
+      {"validity", "per cell, blended probe validity in [0, 1]"},
+      {"occlusion", "per cell, RGBA = shadowmask channels 0-3: blended probe occlusion in [0, 1]"}};
   j["unityL1"] = {
       {"width", 4 * n.x},
       {"height", n.y * n.z},
@@ -262,7 +269,9 @@ Result<LppvOutputFiles> writeLppvOutputs(const LppvVolume& volume, const std::st
       {"axes", unity ? "unity" : "gltf"},
       {"xMirrored", unity},
       {"bounds", {{"min", vecJson(l1Min)}, {"max", vecJson(l1Max)}}},
-      {"occlusion", "1 in all channels (the probe file carries no shadowmask occlusion)"}};
+      {"occlusion",
+       "RGBA = shadowmask channels 0-3: fraction of the channel's light unshadowed (probe "
+       "occlusion blended like the SH; 1 for unused channels)"}};
   Json source = Json::object();
   if (!options.source.empty()) source["probes"] = options.source;
   if (options.autoResolution) {

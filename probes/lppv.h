@@ -81,8 +81,9 @@ Status validateLppvBuildSettings(const LppvBuildSettings& settings);
 
 // A volume over the settings' box filled from the probe field: every sample gets the
 // tetrahedral interpolation of the probes' radiance SH at its position (fillLppvRows; outer
-// cells extrapolate outside the hull) and the blended validity. Rows run in parallel, each
-// starting its walk from the seed grid, so the result is identical at any thread count.
+// cells extrapolate outside the hull), the blended validity and the blended shadowmask
+// occlusion. Rows run in parallel, each starting its walk from the seed grid, so the result
+// is identical at any thread count.
 // `set` must be valid (loadProbeFile / validateProbeSet).
 Result<LppvBuild> buildLppvFromProbes(const ProbeSet& set, const LppvBuildSettings& settings);
 
@@ -114,8 +115,8 @@ glm::vec3 evalUnityShL1(const UnityShL1& packed, glm::vec3 n);
 // block b = X / nx, column i = X % nx, slice z = Y / ny, row j = Y % ny holds grid sample
 // (i, j, z) (image row 0 = y = 0: the rows in file order are Texture3D.SetPixels order,
 // x fastest, then y, then z); block 0 = SHAr, 1 = SHAg, 2 = SHAb, 3 = probe occlusion,
-// as the four quarters of unity_ProbeVolumeSH along x. Occlusion is 1 in all four channels:
-// the probe file carries no per-light (shadowmask) occlusion yet, so nothing is occluded.
+// as the four quarters of unity_ProbeVolumeSH along x. Occlusion is volume.occlusion (the
+// probes' shadowmask occlusion, channel c in component c; 1 when the volume has none).
 // With ShAxes::kUnity the grid is also mirrored in x (column i holds sample nx - 1 - i), so
 // it fits Unity's bounds (-max.x, min.y, min.z) to (-min.x, max.y, max.z).
 Image lppvUnityL1Image(const LppvVolume& volume, ShAxes axes = ShAxes::kGltf);

@@ -25,7 +25,8 @@ namespace kiln {
 
 namespace {
 
-constexpr uint64_t kLightsTag = 0x6c6967687473ull;  // "lights"
+constexpr uint64_t kLightsTag = 0x6c6967687473ull;       // "lights"
+constexpr uint64_t kOcclusionTag = 0x6f63636c75646eull;  // "occludn"
 
 bool isSoftShadowed(const Light& light) {
   return light.type == LightType::Directional ? light.shadowAngle > 0.0f
@@ -47,6 +48,21 @@ std::optional<ShL2Rgb> validNeighbourMean(const ProbeSet& set,
   ShL2Rgb mean;
   for (int k = 0; k < kShL2Count; ++k) mean.c[k] = vec3(sum[k] / double(n));
   return mean;
+}
+
+// Mean occlusion of the valid probes that share a cell with probe `i`; nullopt when none.
+std::optional<glm::vec4> validNeighbourOcclusion(const ProbeSet& set,
+                                                 const std::vector<std::vector<int32_t>>& adjacency,
+                                                 const std::vector<char>& valid, int32_t i) {
+  glm::dvec4 sum(0.0);
+  int n = 0;
+  for (int32_t j : adjacency[i]) {
+    if (!valid[j]) continue;
+    sum += glm::dvec4(set.occlusion[j]);
+    ++n;
+  }
+  if (n == 0) return std::nullopt;
+  return glm::vec4(sum / double(n));
 }
 
 // Probes sharing a cell, per probe (sorted, unique).
@@ -74,7 +90,21 @@ std::string vecText(vec3 p) {
 
 }  // namespace
 
+LightingMode probeLightingMode(const Scene& scene, const ProbeBakeSettings& settings) {
+  if (settings.lightingMode) return *settings.lightingMode;
+  if (scene.settings.lightingMode) {
+    // The glTF loader only accepts the three names, so this parse cannot fail.
+    if (Result<LightingMode> m = parseLightingMode(*scene.settings.lightingMode)) return *m;
+  }
+  return LightingMode::BakedIndirect;
+}
+
+LightModePlan probeLightModePlan(const Scene& scene, const ProbeBakeSettings& settings) {
+  return planLightModes(scene, probeLightingMode(scene, settings));
+}
+
 IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSettings& settings) {
+  const LightModePlan plan = probeLightModePlan(scene, settings);
   IntegratorSettings is;
   is.maxBounces = settings.bounces.value_or(scene.settings.bounces.value_or(kDefaultProbeBounces));
   is.albedoBoost = settings.albedoBoost.value_or(scene.settings.albedoBoost.value_or(1.0f));
@@ -84,10 +114,35 @@ IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSe
   is.directLights.resize(scene.lights.size());
   is.indirectLights.resize(scene.lights.size());
   for (size_t i = 0; i < scene.lights.size(); ++i) {
-    is.directLights[i] = scene.lights[i].mode == LightMode::Baked;
-    is.indirectLights[i] = scene.lights[i].mode != LightMode::Realtime;
+    is.directLights[i] = plan.bakeDirect[i];
+    is.indirectLights[i] = plan.bakeIndirect[i];
   }
   return is;
+}
+
+float probeLightOcclusion(const Integrator& integrator, vec3 p, uint32_t light, uint64_t key,
+                          uint32_t samples) {
+  const Light& l = integrator.scene().lights[light];
+  const uint32_t evaluations = isSoftShadowed(l) ? std::max(1u, samples) : 1u;
+  const uint64_t k = hashValues(key, kOcclusionTag, light);
+  double sum = 0.0;
+  for (uint32_t j = 0; j < evaluations; ++j) {
+    const vec3 v = integrator.lightVisibility(p, vec3(0.0f), light, k, j);
+    sum += (double(v.x) + double(v.y) + double(v.z)) / 3.0;
+  }
+  const double mean = sum / double(evaluations);
+  return std::isfinite(mean) ? float(std::clamp(mean, 0.0, 1.0)) : 1.0f;
+}
+
+glm::vec4 bakeProbeOcclusion(const Integrator& integrator, const LightModePlan& plan, vec3 p,
+                             uint64_t key, uint32_t samples) {
+  glm::vec4 occlusion(1.0f);
+  for (size_t l = 0; l < plan.shadowmaskChannel.size(); ++l) {
+    const int c = plan.shadowmaskChannel[l];
+    if (c >= 0 && c < kProbeOcclusionChannels)
+      occlusion[c] = probeLightOcclusion(integrator, p, uint32_t(l), key, samples);
+  }
+  return occlusion;
 }
 
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
@@ -148,10 +203,23 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   if (!topology) return Error{"tetrahedralization: " + topology.error()};
   ProbeSet set = std::move(topology).value();
 
+  rep.lightModes = probeLightModePlan(scene, settings);
+  rep.warnings.insert(rep.warnings.end(), rep.lightModes.warnings.begin(),
+                      rep.lightModes.warnings.end());
+  const LightModePlan& plan = rep.lightModes;
+  bool anyChannel = false;
+  for (size_t l = 0; l < plan.shadowmaskChannel.size(); ++l) {
+    const int c = plan.shadowmaskChannel[l];
+    if (c >= 0 && c < kProbeOcclusionChannels) {
+      set.occlusionLights[size_t(c)] = int32_t(l);
+      anyChannel = true;
+    }
+  }
   const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, settings));
   rep.integrator = integrator.settings();
   const size_t count = positions.size();
   std::vector<ProbeSample> samples(count);
+  std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
   std::atomic<uint64_t> rays{0};
   ParallelOptions options;
   options.threads = settings.threads;
@@ -163,8 +231,13 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
       [&](size_t begin, size_t end) {
         const uint64_t before = Integrator::threadRayCount();
         for (size_t i = begin; i < end; ++i) {
-          samples[i] = bakeProbe(integrator, positions[i], hashValues(settings.seed, i),
-                                 settings.rays, settings.lightSamples, cancel);
+          const uint64_t key = hashValues(settings.seed, i);
+          samples[i] = bakeProbe(integrator, positions[i], key, settings.rays,
+                                 settings.lightSamples, cancel);
+          if (anyChannel) {
+            occlusion[i] =
+                bakeProbeOcclusion(integrator, plan, positions[i], key, settings.occlusionSamples);
+          }
         }
         // + the first segments traced for validity.
         rays += Integrator::threadRayCount() - before + (end - begin) * settings.rays;
@@ -178,6 +251,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     set.sh[i] = samples[i].sh;
     set.validity[i] = samples[i].validity;
   }
+  set.occlusion = std::move(occlusion);
 
   // Validity: probes inside geometry get their valid neighbours' mean (from the raw bake).
   std::vector<char> valid(count);
@@ -193,6 +267,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
       if (adjacency.empty()) adjacency = cellAdjacency(raw);
       if (auto mean = validNeighbourMean(raw, adjacency, valid, int32_t(i))) {
         set.sh[i] = *mean;
+        // Inside geometry every shadow ray is blocked: take the neighbours' occlusion too.
+        if (auto o = validNeighbourOcclusion(raw, adjacency, valid, int32_t(i)))
+          set.occlusion[i] = *o;
         filled = true;
         ++rep.filledProbes;
       }

@@ -10,6 +10,14 @@
 // E delta(w - s), whose coefficients are c_i = E Y_i(s).
 // The SH stored is RADIANCE SH (src/sh.h); irradiance for a normal is ShL2Rgb::irradiance(n)
 // (E itself, not E / pi).
+//
+// Which light goes into the SH follows the scene's lighting mode (src/light_modes.h, Unity's
+// Mixed Lighting): realtime lights never; baked lights direct + indirect; mixed lights
+// indirect only under baked-indirect and shadowmask (their direct light is added in real time,
+// for dynamic objects as for static ones), direct + indirect under subtractive, and a
+// shadowmask light that got no channel is baked fully. Under shadowmask every channelled light
+// also gets its probe occlusion (ProbeSet::occlusion): the fraction of the light that reaches
+// the probe unblocked, soft shadows included, so dynamic objects get the baked shadows too.
 #pragma once
 
 #include <atomic>
@@ -22,6 +30,7 @@
 #include "kiln/probe_set.h"
 #include "probes/tetrahedralize.h"
 #include "src/integrator.h"
+#include "src/light_modes.h"
 #include "src/progress.h"
 #include "src/result.h"
 #include "src/scene.h"
@@ -46,6 +55,12 @@ struct ProbeBakeSettings {
   // Shadow-visibility evaluations per punctual light (each of the light's shadowSamples
   // rays); more than 1 only matters for soft shadows.
   uint32_t lightSamples = 16;
+  // Mixed lighting mode (which lights bake what, shadowmask channels): nullopt = the scene's
+  // extras.kiln.lightingMode, else baked-indirect.
+  std::optional<LightingMode> lightingMode;
+  // Visibility evaluations (each of the light's shadowSamples rays) averaged into the probe
+  // occlusion of a soft-shadowed shadowmask light (0 counts as 1); hard shadows need 1.
+  uint32_t occlusionSamples = 64;
   // A probe whose share of rays that first hit a back face (of a single-sided surface)
   // exceeds this is inside geometry (DDGI, Majercik et al. 2019): it is counted invalid
   // and, with fillInvalid, its SH is replaced by the mean of its valid neighbours'.
@@ -66,19 +81,27 @@ struct ProbeBakeReport {
   int32_t deringedProbes = 0;          // probes whose SH was windowed
   uint64_t rays = 0;                   // rays traced by the integrator (all threads)
   IntegratorSettings integrator;       // as resolved from the scene and the settings
+  LightModePlan lightModes;            // what each light baked, shadowmask channels
 };
 
+// The lighting mode a bake uses: settings.lightingMode, else the scene's
+// extras.kiln.lightingMode, else baked-indirect.
+LightingMode probeLightingMode(const Scene& scene, const ProbeBakeSettings& settings);
+// planLightModes(scene, probeLightingMode(scene, settings)).
+LightModePlan probeLightModePlan(const Scene& scene, const ProbeBakeSettings& settings);
+
 // The integrator settings a probe bake uses for `scene` (bounces, albedo boost, indirect
-// intensity: settings, else the scene's extras.kiln, else defaults). Light modes: a baked
-// light contributes direct and indirect light; a mixed light only indirect light (its
-// direct light is computed in real time for dynamic objects in every lighting mode, as in
-// Unity); a realtime light nothing.
+// intensity: settings, else the scene's extras.kiln, else defaults). Lights: direct and
+// indirect light per probeLightModePlan (see the header comment).
 IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSettings& settings);
 
 // Bakes probes at `positions` (world space, metres). The ProbeSet has one probe per position
 // in the same order (near-duplicates merged by the topology keep their slot and get their
 // own SH), RADIANCE SH, and validity = 1 - (share of rays whose first hit is the back face
-// of a single-sided surface), the raw fraction in [0, 1] (1 = open space).
+// of a single-sided surface), the raw fraction in [0, 1] (1 = open space); occlusion per
+// probe (bakeProbeOcclusion; all 1 outside shadowmask mode) and occlusionLights from the plan.
+// Invalid probes that are filled get their valid neighbours' mean occlusion too. The plan's
+// warnings (lights that fell back to baked) go into the report.
 // Deterministic: bit-identical output for any thread count. `progress` (unit: probes) and
 // `cancel` are optional; a cancelled bake returns an error "cancelled". Errors: no
 // positions, non-finite positions, rays == 0, topology failure.
@@ -96,6 +119,17 @@ struct ProbeSample {
 };
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr);
+
+// Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
+// Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in
+// probe_baker.cpp), each the mean of the light's shadowSamples shadow rays, taken as the mean
+// of its RGB transmittance; one evaluation when the light's shadows are hard. In [0, 1].
+float probeLightOcclusion(const Integrator& integrator, vec3 p, uint32_t light, uint64_t key,
+                          uint32_t samples);
+// The 4 channels at p: channel plan.shadowmaskChannel[l] = probeLightOcclusion of light l,
+// unused channels 1. `key` as bakeProbe's (bakeProbes passes hashValues(seed, i)).
+glm::vec4 bakeProbeOcclusion(const Integrator& integrator, const LightModePlan& plan, vec3 p,
+                             uint64_t key, uint32_t samples);
 
 // Probe positions from JSON text {"positions": [[x, y, z], ...]}; `name` (the file) prefixes
 // messages, e.g. "probes.json: positions[3]: expected 3 finite numbers".

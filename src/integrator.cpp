@@ -190,8 +190,10 @@ vec3 Integrator::visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_
 // rays; at later vertices those of indirectLights, scaled by bounceIntensity, with one
 // shadow ray each (the path average does the rest). `kind` restricts to hard- or
 // soft-shadowed lights, so irradiance() can evaluate the noise-free hard ones once.
+// `weightedDirection`, when given, gets sum luminance(term) x direction to the light added.
 vec3 Integrator::punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, ShadowKind kind,
-                                    uint64_t key, uint32_t sampleIndex, uint32_t vertex) const {
+                                    uint64_t key, uint32_t sampleIndex, uint32_t vertex,
+                                    vec3* weightedDirection) const {
   vec3 sum(0.0f);
   const auto& selection = atOrigin ? settings_.directLights : settings_.indirectLights;
   for (uint32_t i = 0; i < scene_.lights.size(); ++i) {
@@ -208,7 +210,9 @@ vec3 Integrator::punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, Sha
     if (cosTheta <= 0.0f || glm::dot(ng, wi) <= 0.0f) continue;
     const uint32_t rays = atOrigin && soft ? uint32_t(std::max(1, l.shadowSamples)) : 1u;
     const vec3 vis = visibilityTo(i, offsetRayOrigin(x, ng), key, sampleIndex * rays, rays, vertex);
-    sum += (scale * cosTheta) * e * vis;
+    const vec3 term = (scale * cosTheta) * e * vis;
+    sum += term;
+    if (weightedDirection) *weightedDirection += luminance(term) * wi;
   }
   return sum;
 }
@@ -216,7 +220,9 @@ vec3 Integrator::punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, Sha
 // Emitter NEE at x: one emissive triangle chosen by power, a point uniform on it. Returns
 // the MIS-weighted estimate of the emitters' share of integral L cos dw (W/m^2), i.e.
 // Le cos / pdf x w x visibility with pdf in solid angle = pmf / area x d^2 / |cos_light|.
-vec3 Integrator::sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uPoint) const {
+// `direction`, when given, receives the sampled unit direction (when the result is not 0).
+vec3 Integrator::sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uPoint,
+                                vec3* direction) const {
   const EmitterTable& table = *emitters_;
   float pmf = 0.0f;
   const size_t index = table.distribution.sampleDiscrete(uSelect, &pmf);
@@ -246,17 +252,19 @@ vec3 Integrator::sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uP
   const vec3 origin = offsetRayOrigin(x, ng);
   const vec3 target = offsetRayOrigin(y, glm::dot(nl, wi) < 0.0f ? nl : -nl);
   const vec3 vis = transmittance(origin, target - origin, 1.0f - kShadowEpsilon);
+  if (direction) *direction = wi;
   return le * (cosX * weight / pdfLight) * vis;
 }
 
 // Sky NEE at x: a direction from Sky::sample, MIS-weighted against cosine sampling.
-vec3 Integrator::sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u) const {
+vec3 Integrator::sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u, vec3* direction) const {
   const Sky::Sample s = scene_.sky.sample(u);
   if (!(s.pdf > 0.0f) || isBlack(s.radiance)) return vec3(0.0f);
   const float cosX = glm::dot(ns, s.direction);
   if (cosX <= 0.0f || glm::dot(ng, s.direction) <= 0.0f) return vec3(0.0f);
   const float weight = powerHeuristic(s.pdf, cosX * kInvPi);
   const vec3 vis = transmittance(offsetRayOrigin(x, ng), s.direction, kInfinity);
+  if (direction) *direction = s.direction;
   return s.radiance * (cosX * weight / s.pdf) * vis;
 }
 
@@ -381,41 +389,60 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
 }
 
 LightingEstimate Integrator::irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
-                                        uint32_t sampleCount, uint32_t* backFaceHits) const {
+                                        uint32_t sampleCount, uint32_t* backFaceHits,
+                                        vec3* weightedDirection) const {
   LightingEstimate estimate;
   if (sampleCount == 0) return estimate;
   n = glm::normalize(n);
   const Frame frame = Frame::fromNormal(n);
   const vec3 origin = offsetRayOrigin(p, n);
   // Hard-shadowed punctual lights give the same value for every sample: evaluate once.
-  const vec3 hard = punctualIrradiance(p, n, n, true, ShadowKind::Hard, key, 0, 0);
-  glm::dvec3 sumDirect(0.0), sumIndirect(0.0);
+  vec3 hardDirection(0.0f);
+  const vec3 hard = punctualIrradiance(p, n, n, true, ShadowKind::Hard, key, 0, 0,
+                                       weightedDirection ? &hardDirection : nullptr);
+  glm::dvec3 sumDirect(0.0), sumIndirect(0.0), sumDirection(0.0);
   for (uint32_t s = firstSample; s < firstSample + sampleCount; ++s) {
     SampleStream stream(key, s);
-    vec3 direct = punctualIrradiance(p, n, n, true, ShadowKind::Soft, key, s, 0);
-    if (sampleEmissive_)
-      direct += sampleEmitters(p, n, n, draw1D(stream, 0, kSlotEmitterSelect),
-                               draw2D(stream, 0, kSlotEmitterPoint));
-    if (sampleSky_) direct += sampleSky(p, n, n, draw2D(stream, 0, kSlotSky));
+    // Luminance-weighted directions of this sample's terms (only when asked for).
+    vec3 dirSum(0.0f);
+    vec3* dirOut = weightedDirection ? &dirSum : nullptr;
+    vec3 direct = punctualIrradiance(p, n, n, true, ShadowKind::Soft, key, s, 0, dirOut);
+    if (sampleEmissive_) {
+      vec3 wi(0.0f);
+      const vec3 e = sampleEmitters(p, n, n, draw1D(stream, 0, kSlotEmitterSelect),
+                                    draw2D(stream, 0, kSlotEmitterPoint), &wi);
+      direct += e;
+      dirSum += luminance(e) * wi;
+    }
+    if (sampleSky_) {
+      vec3 wi(0.0f);
+      const vec3 e = sampleSky(p, n, n, draw2D(stream, 0, kSlotSky), &wi);
+      direct += e;
+      dirSum += luminance(e) * wi;
+    }
     vec3 indirect(0.0f);
     const vec3 local = squareToCosineHemisphere(draw2D(stream, 0, kSlotBsdf));
     const float pdf = cosineHemispherePdf(local.z);
     if (pdf > 0.0f) {
       vec3 ld(0.0f), li(0.0f);
-      tracePath(Ray{origin, frame.toWorld(local), 0.0f, kInfinity}, pdf, key, s, ld, li,
-                backFaceHits);
+      const vec3 wi = frame.toWorld(local);
+      tracePath(Ray{origin, wi, 0.0f, kInfinity}, pdf, key, s, ld, li, backFaceHits);
       // L cos / pdf with pdf = cos / pi.
       direct += kPi * ld;
       indirect += kPi * li;
+      dirSum += (luminance(kPi * ld) + luminance(kPi * li) * settings_.indirectIntensity) * wi;
     }
     // A rare NaN/Inf (degenerate geometry) must not poison a texel: drop the sample.
-    if (isFinite(direct) && isFinite(indirect)) {
+    if (isFinite(direct) && isFinite(indirect) && isFinite(dirSum)) {
       sumDirect += glm::dvec3(direct);
       sumIndirect += glm::dvec3(indirect);
+      sumDirection += glm::dvec3(dirSum);
     }
   }
   estimate.direct = hard + vec3(sumDirect / double(sampleCount));
   estimate.indirect = vec3(sumIndirect / double(sampleCount)) * settings_.indirectIntensity;
+  if (weightedDirection)
+    *weightedDirection += hardDirection + vec3(sumDirection / double(sampleCount));
   return estimate;
 }
 

@@ -67,8 +67,16 @@ class Integrator {
   // hit the back face of a single-sided, non-BLEND surface is added to it: a point whose
   // rays mostly see back faces is inside geometry (lightmap texel validity, as probe
   // validity in Unity's Adaptive Probe Volumes). Does not change the estimate.
+  // When `weightedDirection` is given, the luminance-weighted incoming direction of the
+  // estimate is added to it: the mean over the samples of sum_i luminance(c_i) w_i, where c_i
+  // runs over the terms of the estimate (punctual lights, emitter and sky light samples, the
+  // cosine-sampled path, each x indirectIntensity where the estimate applies it) and w_i is
+  // the unit world direction that term's light arrives from. Divided by
+  // luminance(estimate.total()) it is the dominant direction of directional lightmaps, whose
+  // length (<= 1) is the directionality (lightmap/directional.h). Does not change the estimate.
   LightingEstimate irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
-                              uint32_t sampleCount, uint32_t* backFaceHits = nullptr) const;
+                              uint32_t sampleCount, uint32_t* backFaceHits = nullptr,
+                              vec3* weightedDirection = nullptr) const;
 
   // Radiance arriving at p from unit direction `dir` (one path, sample `sampleIndex` of
   // stream `key`): direct = emission seen along the ray (sky, emissive surface); indirect =
@@ -106,9 +114,11 @@ class Integrator {
   vec3 visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_t firstIndex, uint32_t rays,
                     uint32_t dimension) const;
   vec3 punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, ShadowKind kind, uint64_t key,
-                          uint32_t sampleIndex, uint32_t vertex) const;
-  vec3 sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uPoint) const;
-  vec3 sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u) const;
+                          uint32_t sampleIndex, uint32_t vertex,
+                          vec3* weightedDirection = nullptr) const;
+  vec3 sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uPoint,
+                      vec3* direction = nullptr) const;
+  vec3 sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u, vec3* direction = nullptr) const;
   float emitterPdf(uint32_t object, uint32_t triangle, float distance2, float cosLight) const;
   vec3 albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const;
   void tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,

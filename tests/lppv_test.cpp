@@ -417,7 +417,7 @@ TEST(LppvFile, RoundTripThroughAllOutputsIsExact) {
   Result<LppvVolume> loaded = loadLppvFile(files->volume);
   ASSERT_TRUE(loaded.ok()) << loaded.error();
   EXPECT_EQ(serializeLppvVolume(*loaded), serializeLppvVolume(b->volume));
-  EXPECT_EQ(std::filesystem::file_size(files->volume), 64 + 112 * b->volume.cellCount());
+  EXPECT_EQ(std::filesystem::file_size(files->volume), 64 + 128 * b->volume.cellCount());
   // EXR: full float, so exact.
   Result<Image> exr = readHdrImage(files->unityL1);
   ASSERT_TRUE(exr.ok()) << exr.error();
@@ -445,7 +445,7 @@ TEST(LppvFile, RoundTripThroughAllOutputsIsExact) {
 
 TEST(LppvFile, EveryTruncationIsRejected) {
   const std::vector<uint8_t> bytes = serializeLppvVolume(smallVolume());
-  ASSERT_EQ(bytes.size(), 64u + 4u * 112u);
+  ASSERT_EQ(bytes.size(), 64u + 4u * 128u);
   ASSERT_TRUE(parseLppvVolume(bytes, "ok").ok());
   for (size_t n = 0; n < bytes.size(); ++n) {
     const std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));
@@ -498,7 +498,7 @@ TEST(LppvFile, BadValuesAndHeadersAreNamed) {
     return parseError(b);
   };
   EXPECT_NE(patched(0, 0x4b505242).find("magic"), std::string::npos);
-  EXPECT_NE(patched(4, 2).find("version"), std::string::npos);
+  EXPECT_NE(patched(4, 3).find("version"), std::string::npos);
   EXPECT_NE(patched(8, 0).find("resolution.x"), std::string::npos);
   EXPECT_NE(patched(12, 5000).find("resolution.y"), std::string::npos);
   EXPECT_NE(patched(20, 7).find("placement"), std::string::npos);

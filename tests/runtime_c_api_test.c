@@ -1,7 +1,7 @@
 /* runtime_c_api_test.c: the C API (kiln_runtime.h) compiled as C99 and linked against
  * kiln_runtime alone. It writes a tiny .kprobe file byte by byte from the documented format
- * (two probes on a line: a dimension-1 set), then loads and queries it, and checks that bad
- * files and bad arguments come back as status codes with messages.
+ * (version 1, two probes on a line: a dimension-1 set), then loads and queries it, and checks
+ * that bad files and bad arguments come back as status codes with messages.
  * Usage: runtime_c_api_test <writable directory>. Returns 0 on success. */
 #include <math.h>
 #include <stdio.h>
@@ -89,6 +89,8 @@ int main(int argc, char** argv) {
   kiln_probes* probes = NULL;
   kiln_probe_location loc;
   float sh[27], rgb[3];
+  float occlusion[4];
+  int32_t lights[4];
   const float mid[3] = {0.5f, 5.0f, -3.0f};
   const float up[3] = {0.0f, 1.0f, 0.0f};
   float positions[9] = {0.5f, 0.0f, 0.0f, -4.0f, 0.0f, 0.0f, 1.0f, 1.0f, 1.0f};
@@ -119,6 +121,12 @@ int main(int argc, char** argv) {
   CHECK(kiln_probes_irradiance(sh, up, rgb) == KILN_OK);
   CHECK(fabsf(rgb[0] - 3.14159265f * 0.282095f * 1.5f) < 1e-4f);
   CHECK(fabsf(rgb[2] - 3.14159265f * 0.282095f * 2.5f) < 1e-4f);
+  /* A version 1 file has no probe occlusion: 1 in every channel, no channel lights. */
+  CHECK(kiln_probes_sample_occlusion(probes, &loc, occlusion) == KILN_OK);
+  CHECK(occlusion[0] == 1.0f && occlusion[1] == 1.0f && occlusion[2] == 1.0f &&
+        occlusion[3] == 1.0f);
+  CHECK(kiln_probes_occlusion_lights(probes, lights) == KILN_OK);
+  CHECK(lights[0] == -1 && lights[1] == -1 && lights[2] == -1 && lights[3] == -1);
 
   /* Batch: locations, SH and hints together; beyond the ends the line clamps. */
   CHECK(kiln_probes_sample_batch(probes, 3, positions, hints, locs, shs) == KILN_OK);

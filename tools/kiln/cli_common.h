@@ -35,5 +35,8 @@ int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene
 
 // Subcommand registration.
 void registerInfoCommand(CLI::App& app);
+void registerBakeCommand(CLI::App& app);  // kiln bake (lightmaps)
+void registerProbesCommand(CLI::App& app);  // kiln probes bake | query | export
+void registerProbesPlaceCommand(CLI::App& probes);  // kiln probes place | compare-placement
 
 }  // namespace kiln::cli

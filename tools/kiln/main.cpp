@@ -18,6 +18,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("kiln ") + KILN_VERSION);
   app.require_subcommand(1);
   registerInfoCommand(app);
+  registerBakeCommand(app);
+  registerProbesCommand(app);
 
   try {
     app.parse(argc, argv);

@@ -35,6 +35,10 @@ double shortest(float v) {
 
 Json vecJson(glm::vec3 v) { return Json::array({shortest(v.x), shortest(v.y), shortest(v.z)}); }
 
+Json vec4Json(glm::vec4 v) {
+  return Json::array({shortest(v.x), shortest(v.y), shortest(v.z), shortest(v.w)});
+}
+
 Json shJson(const ShL2Rgb& sh) {
   Json j = Json::array();
   for (const glm::vec3& c : sh.c) j.push_back(vecJson(c));
@@ -73,7 +77,8 @@ struct BakeOptions {
   int rays = 16384;
   uint64_t seed = 0;
   std::string backend = "tetgen";
-  int bounces = -1;  // -1 = the scene's extras.kiln.bounces, else kDefaultProbeBounces
+  int bounces = -1;          // -1 = the scene's extras.kiln.bounces, else kDefaultProbeBounces
+  std::string lightingMode;  // empty = the scene's extras.kiln.lightingMode, else baked-indirect
   int threads = 0;
   bool noDering = false;
   bool noSceneProbes = false;
@@ -118,6 +123,14 @@ int runBake(const BakeOptions& o) {
   if (o.bounces >= 0) settings.bounces = o.bounces;
   settings.threads = o.threads;
   settings.dering = !o.noDering;
+  if (!o.lightingMode.empty()) {
+    Result<LightingMode> mode = parseLightingMode(o.lightingMode);
+    if (!mode) {
+      printError(mode.error());
+      return kExitBadUsage;
+    }
+    settings.lightingMode = *mode;
+  }
 
   if (!o.quiet) {
     std::cerr << "kiln: baking " << positions.size() << " probes (" << fromFile
@@ -151,6 +164,14 @@ int runBake(const BakeOptions& o) {
               << report.invalidProbes.size() << " invalid, " << report.deringedProbes
               << " deringed, " << report.integrator.maxBounces << " bounces, " << report.rays
               << " rays in " << seconds << " s\n";
+    std::cerr << "kiln: lighting mode " << lightingModeName(report.lightModes.mode);
+    for (int c = 0; c < kProbeOcclusionChannels; ++c) {
+      const int32_t l = set->occlusionLights[size_t(c)];
+      if (l >= 0) {
+        std::cerr << ", occlusion channel " << c << " = light '" << scene.lights[l].name << "'";
+      }
+    }
+    std::cerr << "\n";
   }
   return kExitOk;
 }
@@ -186,6 +207,7 @@ int runQuery(const QueryOptions& o) {
   const ProbeLocation loc = locateProbe(*set, p);
   const ShL2Rgb sh = interpolateProbes(*set, loc);
   const glm::vec3 e = probeIrradiance(sh, n);
+  const glm::vec4 occlusion = interpolateOcclusion(*set, loc);
   const bool outer = loc.cell >= 0 && set->isOuter(loc.cell);
   if (o.json) {
     Json j;
@@ -198,6 +220,8 @@ int runQuery(const QueryOptions& o) {
     for (float w : loc.weights) j["weights"].push_back(shortest(w));
     j["sh"] = shJson(sh);
     j["irradiance"] = vecJson(e);
+    j["occlusion"] = vec4Json(occlusion);
+    j["occlusionLights"] = set->occlusionLights;
     std::cout << j.dump(2) << "\n";
     return kExitOk;
   }
@@ -213,6 +237,12 @@ int runQuery(const QueryOptions& o) {
     std::printf("  %-4s %.6g %.6g %.6g\n", kNames[i], sh.c[i].x, sh.c[i].y, sh.c[i].z);
   std::printf("irradiance E (not E/pi) for normal (%g, %g, %g): %.6g %.6g %.6g\n", n.x, n.y, n.z,
               e.x, e.y, e.z);
+  const std::array<int32_t, 4>& lights = set->occlusionLights;
+  std::printf(
+      "occlusion (shadowmask channels 0-3, lights %d %d %d %d; -1 unused): %.6g %.6g "
+      "%.6g %.6g\n",
+      lights[0], lights[1], lights[2], lights[3], occlusion.x, occlusion.y, occlusion.z,
+      occlusion.w);
   return kExitOk;
 }
 
@@ -234,15 +264,22 @@ Json exportJson(const ProbeSet& s) {
   j["shConvention"] =
       "radiance SH, real orthonormal basis Y00 Y1-1 Y10 Y11 Y2-2 Y2-1 Y20 Y21 Y22 in glTF world "
       "axes; irradiance E(n) = sum A_l c_i Y_i(n), A = pi, 2pi/3, pi/4";
-  Json positions = Json::array(), validity = Json::array(), sh = Json::array();
+  j["occlusionConvention"] =
+      "per probe, shadowmask channels 0-3: fraction of the light occlusionLights[c] (scene light "
+      "index, -1 unused) that reaches the probe unshadowed, in [0, 1]";
+  j["occlusionLights"] = s.occlusionLights;
+  Json positions = Json::array(), validity = Json::array(), sh = Json::array(),
+       occlusion = Json::array();
   for (int32_t i = 0; i < s.probeCount(); ++i) {
     positions.push_back(vecJson(s.positions[i]));
     validity.push_back(shortest(s.validity[i]));
     sh.push_back(shJson(s.sh[i]));
+    occlusion.push_back(vec4Json(s.occlusion.empty() ? glm::vec4(1.0f) : s.occlusion[i]));
   }
   j["positions"] = std::move(positions);
   j["validity"] = std::move(validity);
   j["sh"] = std::move(sh);
+  j["occlusion"] = std::move(occlusion);
   Json cells = Json::array();
   for (const glm::ivec4& c : s.cells) cells.push_back({c[0], c[1], c[2], c[3]});
   j["cells"] = std::move(cells);
@@ -301,6 +338,11 @@ void registerProbesCommand(CLI::App& app) {
                 "Indirect bounces (default: the scene's extras.kiln.bounces, else " +
                     std::to_string(kDefaultProbeBounces) + ")")
       ->check(CLI::Range(0, 1024));
+  b->add_option("--lighting-mode", bake->lightingMode,
+                "Mixed lighting mode: which lights the probes bake and whether they store "
+                "shadowmask occlusion (default: the scene's extras.kiln.lightingMode, else "
+                "baked-indirect)")
+      ->check(CLI::IsMember({"baked-indirect", "shadowmask", "subtractive"}));
   b->add_option("--threads", bake->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -330,6 +372,7 @@ void registerProbesCommand(CLI::App& app) {
   e->callback(commandCallback([exp]() { return runExport(*exp); }));
 
   registerProbesLppvCommand(*probes);
+  registerProbesPlaceCommand(*probes);
 }
 
 }  // namespace kiln::cli

@@ -60,6 +60,19 @@ kiln_status kiln_probes_locate(const kiln_probes* probes, const float position[3
 kiln_status kiln_probes_sample_sh(const kiln_probes* probes, const kiln_probe_location* location,
                                   float out_sh[27]);
 
+/* Blends the located probes' shadowmask occlusion into out_occlusion[4]: channel c is the
+ * fraction in [0, 1] of the light kiln_probes_occlusion_lights gives for c that reaches the
+ * point unshadowed (baked, soft shadows included), blended with the same weights as the SH.
+ * Multiply that light's realtime direct light by it where there is no realtime shadow
+ * (Unity's probe occlusion). Unused channels, and files without occlusion, give 1. */
+kiln_status kiln_probes_sample_occlusion(const kiln_probes* probes,
+                                         const kiln_probe_location* location,
+                                         float out_occlusion[4]);
+
+/* The scene light (index into the glTF's KHR_lights_punctual lights) of each shadowmask
+ * channel, -1 for an unused channel, into out_lights[4]. */
+kiln_status kiln_probes_occlusion_lights(const kiln_probes* probes, int32_t out_lights[4]);
+
 /* Irradiance E (RGB) for unit normal[3] from radiance SH sh[27] (Ramamoorthi-Hanrahan). */
 kiln_status kiln_probes_irradiance(const float sh[27], const float normal[3], float out_rgb[3]);
 

@@ -135,6 +135,34 @@ kiln_status kiln_probes_sample_sh(const kiln_probes* probes, const kiln_probe_lo
   });
 }
 
+kiln_status kiln_probes_sample_occlusion(const kiln_probes* probes,
+                                         const kiln_probe_location* location,
+                                         float out_occlusion[4]) {
+  return guarded([&] {
+    if (!probes || !location || !out_occlusion) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_sample_occlusion: NULL argument");
+    }
+    kiln::ProbeLocation loc;
+    if (!fromC(probes->set, location, loc)) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT,
+                      "kiln_probes_sample_occlusion: location.probes: index out of range");
+    }
+    const glm::vec4 o = kiln::interpolateOcclusion(probes->set, loc);
+    for (int c = 0; c < 4; ++c) out_occlusion[c] = o[c];
+    return ok();
+  });
+}
+
+kiln_status kiln_probes_occlusion_lights(const kiln_probes* probes, int32_t out_lights[4]) {
+  return guarded([&] {
+    if (!probes || !out_lights) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_occlusion_lights: NULL argument");
+    }
+    for (int c = 0; c < 4; ++c) out_lights[c] = probes->set.occlusionLights[size_t(c)];
+    return ok();
+  });
+}
+
 kiln_status kiln_probes_irradiance(const float sh[27], const float normal[3], float out_rgb[3]) {
   return guarded([&] {
     if (!sh || !normal || !out_rgb) {

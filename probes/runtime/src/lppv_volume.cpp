@@ -24,6 +24,7 @@ static_assert(sizeof(ShL2Rgb) == 27 * sizeof(float), "ShL2Rgb must be 27 packed 
 namespace {
 
 constexpr uint64_t kBytesPerCell = 27 * 4 + 4;
+constexpr uint64_t kOcclusionBytesPerCell = 4 * 4;  // version 2 on
 constexpr size_t kChecksumOffset = 56;
 
 Error fail(std::string_view name, const std::string& what) {
@@ -71,9 +72,10 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   }
   if (std::memcmp(h, "KLPV", 4) != 0) return fail(name, "magic: not a .klppv file");
   const Header hd = decodeHeader(h);
-  if (hd.version != kLppvFileVersion) {
+  if (hd.version < kLppvFileMinVersion || hd.version > kLppvFileVersion) {
     return fail(name, "version: file version " + std::to_string(hd.version) +
-                          ", this reader supports " + std::to_string(kLppvFileVersion));
+                          ", this reader supports " + std::to_string(kLppvFileMinVersion) + " to " +
+                          std::to_string(kLppvFileVersion));
   }
   uint64_t cells = 1;
   static const char* kAxis[3] = {"x", "y", "z"};
@@ -94,7 +96,8 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
         name, "placement: " + std::to_string(hd.placement) + " (0 = cell centre, 1 = cell corner)");
   }
   if (hd.reserved[0] != 0 || hd.reserved[1] != 0) return fail(name, "reserved: must be 0");
-  const uint64_t expected = kLppvFileHeaderSize + cells * kBytesPerCell;
+  const uint64_t perCell = kBytesPerCell + (hd.version >= 2 ? kOcclusionBytesPerCell : 0);
+  const uint64_t expected = kLppvFileHeaderSize + cells * perCell;
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
                           " bytes but its resolution needs " + std::to_string(expected) +
@@ -148,6 +151,7 @@ LppvVolume makeLppvVolume(glm::vec3 boundsMin, glm::vec3 boundsMax, glm::ivec3 r
   assert(boundsMin.x < boundsMax.x && boundsMin.y < boundsMax.y && boundsMin.z < boundsMax.z);
   v.sh.assign(v.cellCount(), ShL2Rgb{});
   v.validity.assign(v.cellCount(), 1.0f);
+  v.occlusion.assign(v.cellCount(), glm::vec4(1.0f));
   return v;
 }
 
@@ -177,6 +181,9 @@ Status validateLppvVolume(const LppvVolume& v, std::string_view name) {
   if (v.validity.size() != n) {
     return fail(name, "validity: size differs from the resolution's cell count");
   }
+  if (!v.occlusion.empty() && v.occlusion.size() != n) {
+    return fail(name, "occlusion: size differs from the resolution's cell count");
+  }
   for (size_t i = 0; i < n; ++i) {
     for (int k = 0; k < kShL2Count; ++k) {
       if (!finite(v.sh[i].c[k])) {
@@ -185,6 +192,12 @@ Status validateLppvVolume(const LppvVolume& v, std::string_view name) {
     }
     if (!(v.validity[i] >= 0.0f && v.validity[i] <= 1.0f)) {
       return fail(name, "validity[" + std::to_string(i) + "]: not in [0, 1]");
+    }
+    for (int c = 0; c < 4 && !v.occlusion.empty(); ++c) {
+      if (!(v.occlusion[i][c] >= 0.0f && v.occlusion[i][c] <= 1.0f)) {
+        return fail(
+            name, "occlusion[" + std::to_string(i) + "][" + std::to_string(c) + "]: not in [0, 1]");
+      }
     }
   }
   return Status::success();
@@ -222,6 +235,20 @@ float sampleLppvValidity(const LppvVolume& v, glm::vec3 p) noexcept {
   return r;
 }
 
+glm::vec4 sampleLppvOcclusion(const LppvVolume& v, glm::vec3 p) noexcept {
+  if (v.occlusion.empty()) return glm::vec4(1.0f);
+  const LppvTrilinear t = locateLppv(v, p);
+  glm::vec4 r(0.0f);
+  float sum = 0.0f;
+  for (int k = 0; k < 8; ++k) {
+    r += t.weights[k] * v.occlusion[t.cells[k]];
+    sum += t.weights[k];
+  }
+  // As interpolateOcclusion: an all-1 neighbourhood gives exactly 1.
+  if (sum > 0.0f) r /= sum;
+  return glm::clamp(r, glm::vec4(0.0f), glm::vec4(1.0f));
+}
+
 glm::vec3 lppvIrradiance(const LppvVolume& v, glm::vec3 p, glm::vec3 n) noexcept {
   return probeIrradiance(sampleLppv(v, p), n);
 }
@@ -252,24 +279,35 @@ void fillLppvRows(const ProbeSet& set, LppvVolume& v, size_t rowBegin, size_t ro
         if (loc.cell >= 0) validity += loc.weights[k] * set.validity[size_t(loc.probes[k])];
       }
       v.validity[cell] = loc.cell >= 0 ? std::clamp(validity, 0.0f, 1.0f) : 0.0f;
+      if (v.occlusion.size() == v.cellCount()) v.occlusion[cell] = interpolateOcclusion(set, loc);
     }
   }
 }
 
-std::vector<uint8_t> serializeLppvVolume(const LppvVolume& v) {
+std::vector<uint8_t> serializeLppvVolume(const LppvVolume& v, uint32_t version) {
   std::vector<uint8_t> out(kLppvFileHeaderSize, 0);
   std::memcpy(out.data(), "KLPV", 4);
-  const uint32_t words[] = {kLppvFileVersion, uint32_t(v.resolution.x), uint32_t(v.resolution.y),
+  const uint32_t words[] = {version, uint32_t(v.resolution.x), uint32_t(v.resolution.y),
                             uint32_t(v.resolution.z), uint32_t(v.placement)};
   std::memcpy(out.data() + 4, words, sizeof(words));
   std::memcpy(out.data() + 24, &v.boundsMin, 12);
   std::memcpy(out.data() + 36, &v.boundsMax, 12);
   const size_t shBytes = v.sh.size() * sizeof(ShL2Rgb);
   const size_t validityBytes = v.validity.size() * sizeof(float);
-  out.resize(kLppvFileHeaderSize + shBytes + validityBytes);
+  std::vector<glm::vec4> occlusion;
+  if (version >= 2) {
+    occlusion =
+        v.occlusion.empty() ? std::vector<glm::vec4>(v.sh.size(), glm::vec4(1.0f)) : v.occlusion;
+  }
+  const size_t occlusionBytes = occlusion.size() * sizeof(glm::vec4);
+  out.resize(kLppvFileHeaderSize + shBytes + validityBytes + occlusionBytes);
   if (shBytes) std::memcpy(out.data() + kLppvFileHeaderSize, v.sh.data(), shBytes);
   if (validityBytes) {
     std::memcpy(out.data() + kLppvFileHeaderSize + shBytes, v.validity.data(), validityBytes);
+  }
+  if (occlusionBytes) {
+    std::memcpy(out.data() + kLppvFileHeaderSize + shBytes + validityBytes, occlusion.data(),
+                occlusionBytes);
   }
   uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), kChecksumOffset));
   sum = fnv1a64(
@@ -298,6 +336,13 @@ Result<LppvVolume> parseLppvVolume(std::span<const uint8_t> bytes, std::string_v
   const uint8_t* p = bytes.data() + kLppvFileHeaderSize;
   std::memcpy(v.sh.data(), p, n * sizeof(ShL2Rgb));
   std::memcpy(v.validity.data(), p + n * sizeof(ShL2Rgb), n * sizeof(float));
+  v.occlusion.resize(n);
+  if (hd.version >= 2) {
+    std::memcpy(v.occlusion.data(), p + n * (sizeof(ShL2Rgb) + sizeof(float)),
+                n * sizeof(glm::vec4));
+  } else {
+    std::fill(v.occlusion.begin(), v.occlusion.end(), glm::vec4(1.0f));  // predates occlusion
+  }
   Status st = validateLppvVolume(v, name);
   if (!st) return Error{st.error()};
   return v;

@@ -485,6 +485,26 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
   return r;
 }
 
+glm::vec4 interpolateOcclusion(const ProbeSet& s, const ProbeLocation& loc) noexcept {
+  if (loc.cell < 0 || s.occlusion.empty()) return glm::vec4(1.0f);
+  glm::vec4 r(0.0f);
+  float sum = 0.0f;
+  for (int k = 0; k < 4; ++k) {
+    const float w = loc.weights[k];
+    if (w == 0.0f) continue;
+    r += w * s.occlusion[size_t(loc.probes[k])];
+    sum += w;
+  }
+  // Weights sum to 1 only up to rounding: dividing by their float sum (accumulated in the same
+  // order) keeps a field that is 1 everywhere exactly 1, so fully lit objects stay unshadowed.
+  if (sum > 0.0f) r /= sum;
+  return glm::clamp(r, glm::vec4(0.0f), glm::vec4(1.0f));
+}
+
+glm::vec4 sampleOcclusion(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
+  return interpolateOcclusion(s, locateProbe(s, p, hint));
+}
+
 ShL2Rgb sampleProbes(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
   return interpolateProbes(s, locateProbe(s, p, hint));
 }
@@ -507,6 +527,19 @@ void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::spa
     const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1);
     if (useHints) hints[i] = loc.cell;
     out[i] = interpolateProbes(s, loc);
+  }
+}
+
+void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
+                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion) noexcept {
+  const bool useHints = hints.size() == points.size();
+  const bool wantSh = sh.size() == points.size();
+  const bool wantOcclusion = occlusion.size() == points.size();
+  for (size_t i = 0; i < points.size(); ++i) {
+    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    if (useHints) hints[i] = loc.cell;
+    if (wantSh) sh[i] = interpolateProbes(s, loc);
+    if (wantOcclusion) occlusion[i] = interpolateOcclusion(s, loc);
   }
 }
 

@@ -32,6 +32,9 @@ constexpr uint64_t kMaxGridCells = 1u << 24;
 constexpr uint64_t kBytesPerProbe = 12 + 108 + 4;
 constexpr uint64_t kBytesPerCell = 16 + 16;
 constexpr uint64_t kBytesPerOuterCell = 36 + 64;
+// Version 2's occlusion block: channel lights, then 4 floats per probe.
+constexpr uint64_t kOcclusionLightsBytes = 4 * 4;
+constexpr uint64_t kOcclusionBytesPerProbe = 4 * 4;
 
 Error fail(std::string_view name, const std::string& what) {
   return Error{std::string(name) + ": " + what};
@@ -89,9 +92,10 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   }
   if (std::memcmp(h, "KPRB", 4) != 0) return fail(name, "magic: not a .kprobe file");
   const Header hd = decodeHeader(h);
-  if (hd.version != kProbeFileVersion) {
+  if (hd.version < kProbeFileMinVersion || hd.version > kProbeFileVersion) {
     return fail(name, "version: file version " + std::to_string(hd.version) +
-                          ", this reader supports " + std::to_string(kProbeFileVersion));
+                          ", this reader supports " + std::to_string(kProbeFileMinVersion) +
+                          " to " + std::to_string(kProbeFileVersion));
   }
   if (hd.dimension > 3) return fail(name, "dimension: " + std::to_string(hd.dimension));
   if (hd.probeCount == 0 || hd.probeCount > kMaxProbes) {
@@ -115,9 +119,11 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   if (gridCells > kMaxGridCells) return fail(name, "gridSize: too many grid cells");
   if (hd.reserved != 0) return fail(name, "reserved: must be 0");
   const uint64_t outer = hd.cellCount - hd.innerCellCount;
-  const uint64_t expected = kProbeFileHeaderSize + hd.probeCount * kBytesPerProbe +
-                            hd.cellCount * kBytesPerCell + outer * kBytesPerOuterCell +
-                            gridCells * 4;
+  uint64_t expected = kProbeFileHeaderSize + hd.probeCount * kBytesPerProbe +
+                      hd.cellCount * kBytesPerCell + outer * kBytesPerOuterCell + gridCells * 4;
+  if (hd.version >= 2) {
+    expected += kOcclusionLightsBytes + hd.probeCount * kOcclusionBytesPerProbe;
+  }
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
                           " bytes but its header counts need " + std::to_string(expected) +
@@ -219,6 +225,15 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
   if (np == 0) return fail(name, "positions: no probes");
   if (s.sh.size() != np) return fail(name, "sh: size differs from positions");
   if (s.validity.size() != np) return fail(name, "validity: size differs from positions");
+  if (!s.occlusion.empty() && s.occlusion.size() != np) {
+    return fail(name, "occlusion: size differs from positions");
+  }
+  for (int c = 0; c < kProbeOcclusionChannels; ++c) {
+    if (s.occlusionLights[c] < -1) {
+      return fail(name, "occlusionLights[" + std::to_string(c) + "]: " +
+                            std::to_string(s.occlusionLights[c]) + " is not a light or -1");
+    }
+  }
   if (nc == 0) return fail(name, "cells: no cells");
   if (s.neighbours.size() != nc) return fail(name, "neighbours: size differs from cells");
   if (s.innerCellCount <= 0 || size_t(s.innerCellCount) > nc) {
@@ -238,6 +253,15 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
     for (int k = 0; k < kShL2Count; ++k) {
       if (!finite(s.sh[i].c[k])) {
         return fail(name, "sh[" + std::to_string(i) + "][" + std::to_string(k) + "]: not finite");
+      }
+    }
+    if (!s.occlusion.empty()) {
+      for (int c = 0; c < kProbeOcclusionChannels; ++c) {
+        // Written so that NaN fails too.
+        if (!(s.occlusion[i][c] >= 0.0f && s.occlusion[i][c] <= 1.0f)) {
+          return fail(name, "occlusion[" + std::to_string(i) + "][" + std::to_string(c) +
+                                "]: not in [0, 1]");
+        }
       }
     }
   }
@@ -306,10 +330,10 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
   return Status::success();
 }
 
-std::vector<uint8_t> serializeProbeSet(const ProbeSet& s) {
+std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
   std::vector<uint8_t> out(kProbeFileHeaderSize, 0);
   std::memcpy(out.data(), "KPRB", 4);
-  const uint32_t words[] = {kProbeFileVersion,
+  const uint32_t words[] = {version,
                             uint32_t(s.dimension),
                             uint32_t(s.positions.size()),
                             uint32_t(s.cells.size()),
@@ -328,6 +352,15 @@ std::vector<uint8_t> serializeProbeSet(const ProbeSet& s) {
   for (const OuterCell& oc : s.outerCells) put(out, oc.normals.data(), 3);
   for (const OuterCell& oc : s.outerCells) put(out, oc.cubic.data(), 4);
   put(out, s.grid.seeds.data(), s.grid.seeds.size());
+  if (version >= 2) {
+    put(out, s.occlusionLights.data(), s.occlusionLights.size());
+    if (s.occlusion.empty()) {
+      const std::vector<glm::vec4> ones(s.positions.size(), glm::vec4(1.0f));
+      put(out, ones.data(), ones.size());
+    } else {
+      put(out, s.occlusion.data(), s.occlusion.size());
+    }
+  }
   uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), 64));
   sum = fnv1a64(std::span<const uint8_t>(out.data() + kProbeFileHeaderSize,
                                          out.size() - kProbeFileHeaderSize),
@@ -367,6 +400,14 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
     p += 64;
   }
   take(p, s.grid.seeds, size_t(hd.gridSize[0]) * hd.gridSize[1] * hd.gridSize[2]);
+  if (hd.version >= 2) {
+    std::memcpy(s.occlusionLights.data(), p, kOcclusionLightsBytes);
+    p += kOcclusionLightsBytes;
+    take(p, s.occlusion, hd.probeCount);
+  } else {
+    // Version 1 predates probe occlusion: nothing is occluded.
+    s.occlusion.assign(hd.probeCount, glm::vec4(1.0f));
+  }
   Status st = validateProbeSet(s, name);
   if (!st) return Error{st.error()};
   return s;

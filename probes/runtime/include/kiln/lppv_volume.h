@@ -42,6 +42,8 @@ enum class LppvPlacement : uint32_t { kCellCenter = 0, kCellCorner = 1 };
 // axes); irradiance is probeIrradiance(sh, n) = E (not E / pi). `validity` is the blend of
 // the probes' validity with the interpolation weights: 1 where every probe the cell draws on
 // is valid, less where some lie inside geometry (a quality mask, not light occlusion).
+// `occlusion` is the probes' shadowmask occlusion (ProbeSet::occlusion, channel c for the
+// light ProbeSet::occlusionLights[c]) blended with the same weights: empty = 1 everywhere.
 struct LppvVolume {
   glm::vec3 boundsMin{0.0f};  // world space, metres; boundsMin < boundsMax on every axis
   glm::vec3 boundsMax{1.0f};
@@ -49,6 +51,7 @@ struct LppvVolume {
   LppvPlacement placement = LppvPlacement::kCellCenter;
   std::vector<ShL2Rgb> sh;  // cellCount() entries
   std::vector<float> validity;
+  std::vector<glm::vec4> occlusion;  // cellCount() entries in [0, 1], or empty
 
   size_t cellCount() const {
     return size_t(resolution.x) * size_t(resolution.y) * size_t(resolution.z);
@@ -65,14 +68,15 @@ inline constexpr int kLppvMaxAxis = 1024;
 // Largest cell count the loader accepts (x * y * z).
 inline constexpr uint64_t kLppvMaxCells = uint64_t(1) << 24;
 
-// An empty (zero SH, validity 1) volume with the given box, resolution and placement, sized
-// for fillLppvFromProbes. Asserts the arguments are valid (see validateLppvVolume).
+// An empty (zero SH, validity 1, occlusion 1) volume with the given box, resolution and
+// placement, sized for fillLppvFromProbes. Asserts the arguments are valid (see
+// validateLppvVolume).
 LppvVolume makeLppvVolume(glm::vec3 boundsMin, glm::vec3 boundsMax, glm::ivec3 resolution,
                           LppvPlacement placement);
 
 // Checks what sampling relies on: resolution in range, finite bounds with min < max, sizes
-// agree with the resolution, SH finite, validity in [0, 1]. Messages read
-// "<name>: <field>[i]: problem". Safe for untrusted data.
+// agree with the resolution, SH finite, validity and occlusion (when present) in [0, 1].
+// Messages read "<name>: <field>[i]: problem". Safe for untrusted data.
 Status validateLppvVolume(const LppvVolume& volume, std::string_view name);
 
 // ---------------------------------------------------------------------------------------------
@@ -98,6 +102,8 @@ LppvTrilinear locateLppv(const LppvVolume& volume, glm::vec3 p) noexcept;
 ShL2Rgb sampleLppv(const LppvVolume& volume, glm::vec3 p) noexcept;
 // Validity at p (same blend).
 float sampleLppvValidity(const LppvVolume& volume, glm::vec3 p) noexcept;
+// Shadowmask occlusion at p (same blend; 1 when the volume has none).
+glm::vec4 sampleLppvOcclusion(const LppvVolume& volume, glm::vec3 p) noexcept;
 // Irradiance E (not E / pi) at p for unit normal n: probeIrradiance(sampleLppv(p), n).
 glm::vec3 lppvIrradiance(const LppvVolume& volume, glm::vec3 p, glm::vec3 n) noexcept;
 
@@ -111,10 +117,11 @@ void sampleLppv(const LppvVolume& volume, std::span<const glm::vec3> points,
 
 // Sets the cells of grid rows [rowBegin, rowEnd) (row r = y + ny z holds cells x = 0..nx-1)
 // to the probe field at their sample positions: sampleProbes's tetrahedral interpolation
-// (outer cells outside the hull), validity blended with the same weights and clamped to
-// [0, 1]. Each row starts its walk from the seed grid and every further lookup from the
-// previous sample's cell, so a row costs about one step per sample, and a row's values do not
-// depend on how the rows are split. noexcept, no allocation: `volume` must already be sized
+// (outer cells outside the hull), validity and occlusion (interpolateOcclusion; only when
+// volume.occlusion is sized) blended with the same weights and clamped to [0, 1]. Each row
+// starts its walk from the seed grid and every further lookup from the previous sample's
+// cell, so a row costs about one step per sample, and a row's values do not depend on how the
+// rows are split. noexcept, no allocation: `volume` must already be sized
 // (makeLppvVolume) and `set` valid. Disjoint row ranges may be filled from different threads.
 void fillLppvRows(const ProbeSet& set, LppvVolume& volume, size_t rowBegin, size_t rowEnd) noexcept;
 
@@ -127,18 +134,23 @@ inline void fillLppvFromProbes(const ProbeSet& set, LppvVolume& volume) noexcept
 // .klppv file
 // ---------------------------------------------------------------------------------------------
 //
-// .klppv, version 1, little-endian:
+// .klppv, version 2, little-endian:
 //   header (64 bytes): "KLPV", u32 version, u32 resolution[3], u32 placement (0 cell centre,
 //     1 cell corner), f32 boundsMin[3], f32 boundsMax[3], u32 reserved[2] = 0,
 //     u64 checksum = FNV-1a 64 of header bytes [0, 56) followed by the whole payload;
 //   payload: f32 sh[cellCount][9][3] (cells x fastest, then y, then z; coefficient-major,
-//     RGB innermost: radiance SH in kiln's basis), f32 validity[cellCount];
-//   so the file is exactly 64 + 112 cellCount bytes.
-inline constexpr uint32_t kLppvFileVersion = 1;
+//     RGB innermost: radiance SH in kiln's basis), f32 validity[cellCount],
+//     f32 occlusion[cellCount][4] (version 2 on: shadowmask occlusion per channel, in [0, 1]);
+//   so the file is exactly 64 + 128 cellCount bytes (version 1: 64 + 112 cellCount, no
+//   occlusion; the reader accepts it and gives occlusion 1).
+inline constexpr uint32_t kLppvFileVersion = 2;
+inline constexpr uint32_t kLppvFileMinVersion = 1;
 inline constexpr size_t kLppvFileHeaderSize = 64;
 
 // Serialization (no validation: writes what it is given, so tests can craft bad files).
-std::vector<uint8_t> serializeLppvVolume(const LppvVolume& volume);
+// `version` 1 drops the occlusion; an empty `occlusion` is written as 1.
+std::vector<uint8_t> serializeLppvVolume(const LppvVolume& volume,
+                                         uint32_t version = kLppvFileVersion);
 // Parses and validates a whole file image; `name` prefixes messages. Allocates only after the
 // header's counts have been checked against the input size. Safe for untrusted input.
 Result<LppvVolume> parseLppvVolume(std::span<const uint8_t> bytes, std::string_view name);

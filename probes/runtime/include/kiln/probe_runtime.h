@@ -41,6 +41,17 @@ ShL2Rgb interpolateProbes(const ProbeSet& set, const ProbeLocation& location) no
 // Radiance SH at p (locate + interpolate).
 ShL2Rgb sampleProbes(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
 
+// sum_k weights[k] * occlusion[probes[k]]: the shadowmask occlusion of the 4 channels at the
+// located point (see ProbeSet), blended with the SH's weights (divided by their float sum, so
+// all-1 probes give exactly 1; clamped to [0, 1]); an object at a probe gets that probe's
+// values. A set without occlusion gives 1 in every channel. A shader multiplies
+// channel c's realtime light (the light set.occlusionLights[c]) by the result's [c] where the
+// light has no realtime shadow (as Unity's probe occlusion does).
+glm::vec4 interpolateOcclusion(const ProbeSet& set, const ProbeLocation& location) noexcept;
+
+// Occlusion at p (locate + interpolateOcclusion).
+glm::vec4 sampleOcclusion(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+
 // Irradiance E (not E / pi) for unit normal n from radiance SH (Ramamoorthi and Hanrahan
 // 2001; see src/sh.h).
 inline glm::vec3 probeIrradiance(const ShL2Rgb& sh, glm::vec3 n) noexcept {
@@ -53,5 +64,9 @@ void locateProbes(const ProbeSet& set, std::span<const glm::vec3> points,
                   std::span<int32_t> hints, std::span<ProbeLocation> out) noexcept;
 void sampleProbes(const ProbeSet& set, std::span<const glm::vec3> points,
                   std::span<int32_t> hints, std::span<ShL2Rgb> out) noexcept;
+// Batch SH and occlusion together (one lookup per point): `sh` and `occlusion` are each empty
+// (not wanted) or have points.size() entries.
+void sampleProbes(const ProbeSet& set, std::span<const glm::vec3> points, std::span<int32_t> hints,
+                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion) noexcept;
 
 }  // namespace kiln

@@ -60,6 +60,17 @@ struct ProbeSeedGrid {
 //  0: a single distinct position: one cell {probe, -1, -1, -1}; every query gets that probe.
 // Probes merged into another (near-duplicates) keep their slot in `positions` and `sh` but
 // appear in no cell.
+//
+// Probe occlusion (Unity's "probe occlusion" for Shadowmask mixed lighting): occlusion[i][c]
+// is the fraction of shadowmask channel c's light that reaches probe i unblocked, in [0, 1]
+// (1 = fully lit, 0 = in its hard shadow; soft shadows give values between), as the
+// shadowmask texture holds it for lightmapped surfaces. A dynamic object blends it with the
+// same weights as the SH (interpolateOcclusion) and multiplies the light's realtime direct
+// contribution by it beyond the realtime shadow distance. occlusionLights[c] is the scene
+// light (index into the glTF's KHR_lights_punctual lights) that owns channel c, -1 for an
+// unused channel, whose occlusion is always 1.
+inline constexpr int kProbeOcclusionChannels = 4;
+
 struct ProbeSet {
   int32_t dimension = 3;
   std::vector<glm::vec3> positions;
@@ -70,6 +81,9 @@ struct ProbeSet {
   int32_t innerCellCount = 0;
   std::vector<OuterCell> outerCells;  // cells.size() - innerCellCount entries
   ProbeSeedGrid grid;
+  // Per probe shadowmask occlusion (see above); empty = 1 everywhere (no shadowmask lights).
+  std::vector<glm::vec4> occlusion;
+  std::array<int32_t, kProbeOcclusionChannels> occlusionLights{-1, -1, -1, -1};
 
   int32_t probeCount() const { return int32_t(positions.size()); }
   int32_t cellCount() const { return int32_t(cells.size()); }
@@ -85,24 +99,31 @@ void computeOuterCellCubics(ProbeSet& set);
 void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 
 // Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
-// symmetric, values finite. Messages read "<name>: <field>[i]: problem". Safe for untrusted
+// symmetric, values finite, occlusion empty or one entry per probe in [0, 1], channel lights
+// >= -1. Messages read "<name>: <field>[i]: problem". Safe for untrusted
 // data.
 Status validateProbeSet(const ProbeSet& set, std::string_view name);
 
-// .kprobe file, version 1, little-endian:
+// .kprobe file, version 2, little-endian:
 //   header (72 bytes): "KPRB", u32 version, u32 dimension, u32 probeCount, u32 cellCount,
 //     u32 innerCellCount, u32 gridSize[3], f32 gridMin[3], f32 gridMax[3], u32 reserved = 0,
 //     u64 checksum = FNV-1a 64 of header bytes [0, 64) followed by the whole payload;
 //   payload: f32 positions[probeCount][3], f32 sh[probeCount][9][3] (coefficient-major,
 //     RGB innermost), f32 validity[probeCount], i32 cells[cellCount][4],
 //     i32 neighbours[cellCount][4], f32 outerNormals[outerCount][3][3],
-//     f32 outerCubic[outerCount][4][4], i32 seeds[gridSize product];
+//     f32 outerCubic[outerCount][4][4], i32 seeds[gridSize product],
+//     and from version 2 on: i32 occlusionLights[4] (scene light per shadowmask channel, -1
+//     unused), f32 occlusion[probeCount][4] (each in [0, 1]; unused channels 1);
 //   where outerCount = cellCount - innerCellCount.
-inline constexpr uint32_t kProbeFileVersion = 1;
+// Version 1 is version 2 without the occlusion block; the reader accepts both and gives a
+// version 1 file occlusion 1 in every channel and no channel lights.
+inline constexpr uint32_t kProbeFileVersion = 2;
+inline constexpr uint32_t kProbeFileMinVersion = 1;
 inline constexpr size_t kProbeFileHeaderSize = 72;
 
-// Serialization (no validation: write what is given, so tests can craft bad files).
-std::vector<uint8_t> serializeProbeSet(const ProbeSet& set);
+// Serialization (no validation: write what is given, so tests can craft bad files). `version`
+// 1 drops the occlusion (for readers that predate it); an empty `occlusion` is written as 1.
+std::vector<uint8_t> serializeProbeSet(const ProbeSet& set, uint32_t version = kProbeFileVersion);
 // Parses and validates a whole file image; `name` prefixes messages. Never allocates more than
 // the input size justifies. Safe for untrusted input.
 Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view name);

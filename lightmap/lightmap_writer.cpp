@@ -1,0 +1,245 @@
+// lightmap_writer.cpp: kiln bake's output files (see lightmap_writer.h and
+// docs/lightmap_outputs.md). Every file is first written under a temporary name in the
+// output directory ("<name>.kiln-tmp"); only when all were written are they renamed, the
+// manifest last, so that a failure leaves the previous outputs as they were.
+#include "lightmap/lightmap_writer.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+
+#include "lightmap/gltf_writer.h"
+#include "lightmap/ldr_encoding.h"
+
+namespace kiln {
+namespace {
+
+using Json = nlohmann::json;
+namespace fs = std::filesystem;
+
+Status writeBytes(const std::string& path, const void* data, size_t size) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) return Error{path + ": cannot open for writing"};
+  out.write(static_cast<const char*>(data), std::streamsize(size));
+  out.close();
+  if (!out) return Error{path + ": write failed"};
+  return Status::success();
+}
+
+// Files written under temporary names, renamed together by commit().
+class StagedFiles {
+ public:
+  explicit StagedFiles(fs::path dir) : dir_(std::move(dir)) {}
+  ~StagedFiles() { discard(); }
+
+  // Writes `name` through `write(temporaryPath)`.
+  Status stage(const std::string& name, const std::function<Status(const std::string&)>& write) {
+    const std::string tmp = (dir_ / (name + ".kiln-tmp")).string();
+    staged_.push_back({tmp, (dir_ / name).string()});
+    Status s = write(tmp);
+    if (!s) return Error{(dir_ / name).string() + ": " + s.error()};
+    return Status::success();
+  }
+
+  Status commit() {
+    for (size_t i = 0; i < staged_.size(); ++i) {
+      std::error_code ec;
+      fs::rename(staged_[i].first, staged_[i].second, ec);
+      if (ec) {
+        staged_.erase(staged_.begin(), staged_.begin() + long(i));
+        return Error{staged_.front().second + ": " + ec.message()};
+      }
+    }
+    staged_.clear();
+    return Status::success();
+  }
+
+  void discard() {
+    for (const auto& [tmp, final] : staged_) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      fs::remove(tmp + ".tmp", ec);  // writeExr/writeLdrPng's own temporary
+    }
+    staged_.clear();
+  }
+
+ private:
+  fs::path dir_;
+  std::vector<std::pair<std::string, std::string>> staged_;  // temporary, final
+};
+
+const char* ldrName(LdrEncoding e) {
+  switch (e) {
+    case LdrEncoding::Rgbm:
+      return "rgbm";
+    case LdrEncoding::Dldr:
+      return "dldr";
+    case LdrEncoding::None:
+      break;
+  }
+  return "none";
+}
+
+}  // namespace
+
+std::string lightmapFileName(int page, const char* kind) {
+  return "lightmap-" + std::to_string(page) + "_" + kind + ".exr";
+}
+
+Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSettings& o) {
+  // Everything that changes the output; `threads` does not (deterministic) and is left out.
+  Json j;
+  j["preset"] = o.preset.empty() ? Json(nullptr) : Json(o.preset);
+  j["resolution"] = s.resolution;
+  j["padding"] = s.padding;
+  j["maxSize"] = s.maxSize;
+  j["lockAtlas"] = o.lockAtlas.empty() ? Json(nullptr) : Json(o.lockAtlas);
+  j["samplesPerTexel"] = s.samplesPerTexel;
+  j["supersampling"] = s.supersampling;
+  j["seed"] = s.seed;
+  j["bounces"] = s.bounces;
+  j["albedoBoost"] = s.albedoBoost;
+  j["indirectIntensity"] = s.indirectIntensity;
+  j["backfaceTolerance"] = s.backfaceTolerance;
+  j["ambientOcclusion"] = s.ambientOcclusion;
+  j["aoMaxDistance"] = s.aoMaxDistance;
+  j["aoAmount"] = s.aoAmount;
+  j["lightingMode"] = lightingModeName(s.lightingMode);
+  j["directional"] = s.directional;
+  j["shadowColor"] = {s.shadowColor.r, s.shadowColor.g, s.shadowColor.b};
+  j["denoise"] = s.denoise;
+  j["stitchSeams"] = s.stitchSeams;
+  j["ldr"] = ldrName(o.ldr);
+  j["value"] = "E/pi (outgoing radiance of a white Lambertian surface), linear";
+  j["kilnVersion"] = o.kilnVersion;
+  return j;
+}
+
+Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResult& result,
+                            const LightmapBakeSettings& settings,
+                            const LightmapOutputSettings& output) {
+  if (output.outDir.empty()) return Error{"no output directory given"};
+  if (result.pages.size() != result.layout.pages.size())
+    return Error{"bake result has " + std::to_string(result.pages.size()) + " pages but its atlas " +
+                 std::to_string(result.layout.pages.size())};
+  const fs::path dir(output.outDir);
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir))
+    return Error{output.outDir + ": cannot create the output directory" +
+                 (ec ? ": " + ec.message() : std::string())};
+
+  StagedFiles files(dir);
+  Json manifest;
+  manifest["version"] = 1;
+  Json atlas = atlasToJson(result.layout, result.scene);
+  Json lightmaps = atlas["lightmaps"];
+  for (size_t i = 0; i < result.pages.size(); ++i) {
+    const LightmapPageResult& page = result.pages[i];
+    const int index = int(i);
+    const AtlasPage& size = result.layout.pages[i];
+    if (page.light.width != size.width || page.light.height != size.height ||
+        page.light.channels < 3)
+      return Error{"bake result: lightmap " + std::to_string(i) + " is " +
+                   std::to_string(page.light.width) + " x " + std::to_string(page.light.height) +
+                   " x " + std::to_string(page.light.channels) + ", its atlas page " +
+                   std::to_string(size.width) + " x " + std::to_string(size.height) + " RGB"};
+    Json fileNames;
+    fileNames["light"] = lightmapFileName(index, "light");
+    if (Status s = files.stage(fileNames["light"],
+                               [&](const std::string& p) { return writeExr(p, page.light); });
+        !s)
+      return s;
+    if (!page.ambientOcclusion.empty()) {
+      fileNames["ao"] = lightmapFileName(index, "ao");
+      if (Status s = files.stage(
+              fileNames["ao"],
+              [&](const std::string& p) { return writeExr(p, page.ambientOcclusion); });
+          !s)
+        return s;
+    }
+    // Directional mode and shadowmask (docs/mixed_lighting.md): RGBA, half floats.
+    for (auto [image, kind] : {std::pair{&page.direction, "direction"},
+                               std::pair{&page.shadowmask, "shadowmask"}}) {
+      if (image->empty()) continue;
+      fileNames[kind] = lightmapFileName(index, kind);
+      if (Status s = files.stage(fileNames[kind],
+                                 [&](const std::string& p) { return writeExr(p, *image); });
+          !s)
+        return s;
+    }
+    if (output.ldr != LdrEncoding::None) {
+      const std::string name =
+          "lightmap-" + std::to_string(index) + "_light_" + ldrName(output.ldr) + ".png";
+      fileNames["lightLdr"] = name;
+      const LdrImage ldr =
+          output.ldr == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
+      if (Status s = files.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldr); });
+          !s)
+        return s;
+    }
+    lightmaps[i]["files"] = fileNames;
+  }
+  manifest["lightmaps"] = lightmaps;
+  manifest["objects"] = atlas["objects"];
+  manifest["settings"] = lightmapSettingsJson(settings, output);
+  // What each light contributed under the lighting mode, and its shadowmask channel.
+  Json lights = Json::array();
+  const LightModePlan& plan = result.lightModes;
+  for (size_t l = 0; l < result.scene.lights.size(); ++l) {
+    const Light& light = result.scene.lights[l];
+    Json e = {{"light", light.name}, {"lightIndex", light.lightIndex}};
+    if (l < plan.bakeDirect.size()) e["bakedDirect"] = bool(plan.bakeDirect[l]);
+    if (l < plan.bakeIndirect.size()) e["bakedIndirect"] = bool(plan.bakeIndirect[l]);
+    if (l < plan.shadowmaskChannel.size()) e["shadowmaskChannel"] = plan.shadowmaskChannel[l];
+    lights.push_back(e);
+  }
+  manifest["lights"] = lights;
+  if (output.ldr != LdrEncoding::None)
+    manifest["settings"]["ldrDecode"] =
+        output.ldr == LdrEncoding::Rgbm
+            ? "rgb = png.rgb * png.a * " + std::to_string(int(kRgbmRange)) +
+                  " (PNG sampled as linear UNORM)"
+            : std::string("rgb = 2 * png.rgb (PNG sampled as sRGB, i.e. linearised)");
+
+  std::vector<std::string> warnings = result.warnings;
+  if (output.writeGltf) {
+    Result<OutputGltf> gltf = buildOutputGltf(scenePath, result, lightmaps, output.outDir);
+    if (!gltf) return Error{gltf.error()};
+    for (const std::string& w : gltf->warnings) warnings.push_back(w);
+    for (const auto& [name, bytes] : gltf->binaries)
+      if (Status s = files.stage(name,
+                                 [&](const std::string& p) {
+                                   return writeBytes(p, bytes.data(), bytes.size());
+                                 });
+          !s)
+        return s;
+    const std::string& text = gltf->text;
+    if (Status s = files.stage(gltf->fileName,
+                               [&](const std::string& p) {
+                                 return writeBytes(p, text.data(), text.size());
+                               });
+        !s)
+      return s;
+    manifest["gltf"] = gltf->fileName;
+  }
+  manifest["scene"] = fs::path(scenePath).filename().string();
+  manifest["warnings"] = warnings;
+  manifest["stats"] = {{"texels", result.stats.texels},
+                       {"invalidTexels", result.stats.invalidTexels},
+                       {"rays", result.stats.rays}};  // no times: the files stay deterministic
+  const std::string text = manifest.dump(2) + "\n";
+  // The manifest is staged last, so it is renamed last: once it is there, everything it
+  // names is too.
+  if (Status s = files.stage(kManifestFileName,
+                             [&](const std::string& p) {
+                               return writeBytes(p, text.data(), text.size());
+                             });
+      !s)
+    return s;
+  return files.commit();
+}
+
+}  // namespace kiln

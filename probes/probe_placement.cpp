@@ -1,0 +1,802 @@
+// probe_placement.cpp: automatic probe placement (see probe_placement.h and
+// docs/probe_placement.md for the algorithm and the measurements behind its choices).
+#include "probes/probe_placement.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <numeric>
+#include <set>
+#include <sstream>
+
+#include "kiln/probe_runtime.h"
+#include "probes/tetrahedralize.h"
+#include "src/integrator.h"
+#include "src/parallel.h"
+#include "src/sampling.h"
+
+namespace kiln {
+
+using glm::ivec3;
+namespace {
+
+// Streams of random numbers are keyed by what they serve; these tags keep them apart.
+constexpr uint64_t kCheckPointTag = 0x636865636bULL;  // "check"
+constexpr uint64_t kCandidateTag = 0x63616e64ULL;     // "cand"
+constexpr uint64_t kTruthTag = 0x7472757468ULL;       // "truth"
+constexpr uint64_t kSpawnTag = 0x737061776eULL;       // "spawn"
+
+// A key from a position's bits: the rays probing a point depend on where it is, not on which
+// list it is in or which thread looks.
+uint64_t positionKey(vec3 p) {
+  uint32_t b[3];
+  std::memcpy(b, &p, sizeof b);
+  return hashValues(b[0], (uint64_t(b[1]) << 32) | b[2]);
+}
+
+std::string formatMetres(float v) {
+  std::ostringstream s;
+  s.precision(3);
+  s << v << " m";
+  return s.str();
+}
+
+float volumeOf(const Bounds3& b) {
+  const vec3 e = b.extent();
+  return e.x * e.y * e.z;
+}
+
+// Percentile of a copy (nearest rank).
+float percentile(std::vector<float> v, double q) {
+  if (v.empty()) return 0.0f;
+  const size_t k = std::min(v.size() - 1, size_t(std::ceil(q * double(v.size()))) - 1);
+  std::nth_element(v.begin(), v.begin() + ptrdiff_t(k), v.end());
+  return v[k];
+}
+
+// Quantized position for de-duplicating relocated points that landed on the same spot.
+std::tuple<int64_t, int64_t, int64_t> quantize(vec3 p, float cell) {
+  return {int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
+          int64_t(std::floor(p.z / cell))};
+}
+
+}  // namespace
+
+// ---- validity --------------------------------------------------------------------------
+
+PointProbe probePoint(const Scene& scene, const Tracer& tracer, vec3 p, uint32_t rays) {
+  PointProbe out;
+  const uint64_t key = positionKey(p);
+  uint32_t back = 0;
+  for (uint32_t s = 0; s < rays; ++s) {
+    const vec3 dir = squareToUniformSphere(sobol2D(s, key));
+    const std::optional<Hit> hit = tracer.intersect(Ray{p, dir, 0.0f, kInfinity});
+    if (!hit) continue;
+    const Material& m = scene.materialOf(hit->object, hit->triangle);
+    if (hit->backFace && !m.doubleSided && m.alphaMode != AlphaMode::Blend) {
+      ++back;
+      if (hit->t < out.nearestBackDistance) {
+        out.nearestBackDistance = hit->t;
+        out.nearestBackDirection = dir;
+      }
+    }
+    if (hit->t < out.nearestDistance) {
+      const float c = glm::dot(dir, hit->geometricNormal);
+      out.nearestDistance = hit->t;
+      out.nearestNormal = c > 0.0f ? -hit->geometricNormal : hit->geometricNormal;
+      out.nearestPlaneDistance = hit->t * std::abs(c);
+    }
+  }
+  out.backfaceRatio = rays ? float(back) / float(rays) : 0.0f;
+  return out;
+}
+
+bool isValidProbePoint(const Scene& scene, const Tracer& tracer, vec3 p,
+                       const ProbeValiditySettings& settings) {
+  const PointProbe pp = probePoint(scene, tracer, p, settings.rays);
+  return pp.backfaceRatio <= settings.invalidBackfaceRatio &&
+         pp.nearestDistance >= settings.minSurfaceDistance;
+}
+
+RelocatedPoint relocateProbePoint(const Scene& scene, const Tracer& tracer, vec3 p,
+                                  const ProbeValiditySettings& settings,
+                                  std::span<const Bounds3> volumes) {
+  RelocatedPoint out;
+  out.position = p;
+  // Moves aim 10% past the minimum distance so that the ray estimate of the distance (an
+  // upper bound within a few percent at 96+ rays) still passes after the move.
+  const float target = 1.1f * settings.minSurfaceDistance;
+  for (int move = 0; move <= settings.maxMoves; ++move) {
+    const PointProbe pp = probePoint(scene, tracer, out.position, settings.rays);
+    const bool inside = pp.backfaceRatio > settings.invalidBackfaceRatio;
+    const bool tooClose = pp.nearestDistance < settings.minSurfaceDistance;
+    if (!inside && !tooClose) {
+      bool contained = volumes.empty();
+      for (const Bounds3& b : volumes) contained = contained || b.contains(out.position);
+      if (contained) {
+        out.valid = true;
+        return out;
+      }
+      if (!out.why.empty()) out.why += "; ";
+      out.why += "dropped: moved outside the placement volumes";
+      return out;
+    }
+    if (move == settings.maxMoves) break;
+    if (!out.why.empty()) out.why += "; ";
+    if (inside) {
+      if (!std::isfinite(pp.nearestBackDistance)) break;
+      // DDGI's relocation: step through the nearest back face, then clear the surface.
+      const float step = pp.nearestBackDistance + target;
+      out.position += pp.nearestBackDirection * step;
+      out.why += "inside geometry (" + std::to_string(int(std::lround(100 * pp.backfaceRatio))) +
+                 "% back faces): moved " + formatMetres(step) + " through the nearest back face";
+    } else {
+      const float step = std::max(target - pp.nearestPlaneDistance, 0.01f * target);
+      out.position += pp.nearestNormal * step;
+      out.why += "within " + formatMetres(pp.nearestDistance) + " of a surface: pushed " +
+                 formatMetres(step) + " along its normal";
+    }
+    out.moved = true;
+  }
+  out.valid = false;
+  if (!out.why.empty()) out.why += "; ";
+  out.why += "dropped: still inside geometry or too close to a surface";
+  return out;
+}
+
+std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds3> volumes) {
+  if (!volumes.empty()) return {volumes.begin(), volumes.end()};
+  Bounds3 b;
+  for (const Object& o : scene.objects) {
+    if (!o.settings.isStatic) continue;
+    for (const vec3& v : o.positions) b.extend(v);
+  }
+  if (b.empty()) b = scene.bounds;
+  return {b};
+}
+
+std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
+                                    std::span<const Bounds3> volumes, uint32_t count,
+                                    uint64_t seed, const ProbeValiditySettings& validity,
+                                    int threads) {
+  std::vector<float> weights;
+  for (const Bounds3& b : volumes) weights.push_back(volumeOf(b));
+  const Distribution1D pick(weights);
+  std::vector<vec3> points(count);
+  std::vector<uint8_t> found(count, 0);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 8;
+  parallelFor(
+      count,
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          const uint64_t key = hashValues(seed, kCheckPointTag, i);
+          for (uint32_t attempt = 0; attempt < 256; ++attempt) {
+            SampleStream stream(key, attempt);
+            const Bounds3& b = volumes[pick.sampleDiscrete(stream.get1D())];
+            const vec2 u = stream.get2D();
+            const float w = stream.get1D();
+            const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
+            if (isValidProbePoint(scene, tracer, p, validity)) {
+              points[i] = p;
+              found[i] = 1;
+              break;
+            }
+          }
+        }
+      },
+      options);
+  std::vector<vec3> out;
+  for (uint32_t i = 0; i < count; ++i)
+    if (found[i]) out.push_back(points[i]);
+  return out;
+}
+
+namespace {
+
+// Relocates every point in parallel (results in input order).
+std::vector<RelocatedPoint> relocateAll(const Scene& scene, const Tracer& tracer,
+                                        std::span<const vec3> points,
+                                        const ProbeValiditySettings& validity,
+                                        std::span<const Bounds3> volumes, int threads,
+                                        const std::atomic<bool>* cancel = nullptr) {
+  std::vector<RelocatedPoint> out(points.size());
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 16;
+  options.cancel = cancel;
+  parallelFor(
+      points.size(),
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i)
+          out[i] = relocateProbePoint(scene, tracer, points[i], validity, volumes);
+      },
+      options);
+  return out;
+}
+
+// Cell-centred lattice of spacing about h over the volumes, relocated, invalid points dropped,
+// duplicates merged.
+std::vector<vec3> validGrid(const Scene& scene, const Tracer& tracer,
+                            std::span<const Bounds3> volumes, float h,
+                            const ProbeValiditySettings& validity, int threads) {
+  std::vector<vec3> lattice;
+  for (const Bounds3& b : volumes) {
+    const vec3 e = b.extent();
+    ivec3 n;
+    for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
+    for (int z = 0; z < n.z; ++z)
+      for (int y = 0; y < n.y; ++y)
+        for (int x = 0; x < n.x; ++x)
+          lattice.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
+  }
+  const std::vector<RelocatedPoint> moved =
+      relocateAll(scene, tracer, lattice, validity, volumes, threads);
+  std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
+  std::vector<vec3> out;
+  for (const RelocatedPoint& r : moved) {
+    if (!r.valid) continue;
+    if (!seen.insert(quantize(r.position, 0.5f * validity.minSurfaceDistance)).second) continue;
+    out.push_back(r.position);
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<std::vector<vec3>> uniformGridPositions(const Scene& scene, const Tracer& tracer,
+                                               std::span<const Bounds3> volumes, uint32_t count,
+                                               const ProbeValiditySettings& validity,
+                                               int threads) {
+  if (count < 4) return Error{"uniform grid: count must be at least 4"};
+  float total = 0.0f;
+  for (const Bounds3& b : volumes) total += volumeOf(b);
+  if (!(total > 0.0f)) return Error{"uniform grid: the volumes are empty"};
+  // Find a spacing with at least `count` valid points, then the largest such spacing.
+  float lo = std::cbrt(total / float(count));  // count(lo) >= count once found
+  std::vector<vec3> best = validGrid(scene, tracer, volumes, lo, validity, threads);
+  for (int i = 0; i < 12 && best.size() < count; ++i) {
+    lo *= 0.85f;
+    best = validGrid(scene, tracer, volumes, lo, validity, threads);
+  }
+  if (best.size() < count) return Error{"uniform grid: too few valid points in the volumes"};
+  float hi = lo * 2.0f;
+  for (int i = 0; i < 14 && best.size() != count; ++i) {
+    const float mid = 0.5f * (lo + hi);
+    std::vector<vec3> g = validGrid(scene, tracer, volumes, mid, validity, threads);
+    if (g.size() >= count) {
+      lo = mid;
+      best = std::move(g);
+    } else {
+      hi = mid;
+    }
+  }
+  // Remove the surplus evenly.
+  std::vector<vec3> out;
+  out.reserve(count);
+  for (uint32_t k = 0; k < count; ++k)
+    out.push_back(best[size_t(uint64_t(k) * best.size() / count)]);
+  return out;
+}
+
+// ---- error measurement --------------------------------------------------------------------
+
+namespace {
+const std::array<vec3, 6> kAxisNormals = {vec3(1, 0, 0),  vec3(-1, 0, 0), vec3(0, 1, 0),
+                                          vec3(0, -1, 0), vec3(0, 0, 1),  vec3(0, 0, -1)};
+}
+
+float irradianceRms(const ShL2Rgb& sh) {
+  float sum = 0.0f;
+  for (const vec3& n : kAxisNormals) {
+    const float e = luminance(sh.irradiance(n));
+    sum += e * e;
+  }
+  return std::sqrt(sum / 6.0f);
+}
+
+float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+  float diff = 0.0f, ref = 0.0f;
+  for (const vec3& n : kAxisNormals) {
+    const float t = luminance(truth.irradiance(n));
+    const float d = luminance(estimate.irradiance(n)) - t;
+    diff += d * d;
+    ref += t * t;
+  }
+  return std::sqrt(diff / 6.0f) / std::max(std::sqrt(ref / 6.0f), floor);
+}
+
+FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
+                             std::span<const ShL2Rgb> truth, float floor, int threads) {
+  FieldError out;
+  out.perPoint.assign(points.size(), 0.0f);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 64;
+  parallelFor(
+      points.size(),
+      [&](size_t begin, size_t end) {
+        int32_t hint = -1;
+        for (size_t i = begin; i < end; ++i) {
+          const ProbeLocation loc = locateProbe(set, points[i], hint);
+          hint = loc.cell;
+          out.perPoint[i] = relativeIrradianceError(truth[i], interpolateProbes(set, loc), floor);
+        }
+      },
+      options);
+  double sum = 0.0;
+  for (float e : out.perPoint) {
+    sum += e;
+    out.max = std::max(out.max, e);
+  }
+  out.mean = points.empty() ? 0.0f : float(sum / double(points.size()));
+  out.p95 = percentile(out.perPoint, 0.95);
+  return out;
+}
+
+std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
+                                 std::span<const vec3> points, const ProbeBakeSettings& settings,
+                                 Progress* progress, const std::atomic<bool>* cancel) {
+  const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, settings));
+  std::vector<ShL2Rgb> out(points.size());
+  ParallelOptions options;
+  options.threads = settings.threads;
+  options.grain = 4;
+  options.progress = progress;
+  options.cancel = cancel;
+  const bool done = parallelFor(
+      points.size(),
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i)
+          out[i] = bakeProbe(integrator, points[i], hashValues(settings.seed, i), settings.rays,
+                             settings.lightSamples, cancel)
+                       .sh;
+      },
+      options);
+  if (!done || (cancel && cancel->load())) return {};
+  return out;
+}
+
+CellCrossing countCellsCrossingGeometry(const Tracer& tracer, const ProbeSet& set) {
+  CellCrossing out;
+  if (set.dimension != 3) return out;
+  out.innerCells = uint32_t(set.innerCellCount);
+  for (int32_t c = 0; c < set.innerCellCount; ++c) {
+    const glm::ivec4 cell = set.cells[size_t(c)];
+    bool crosses = false;
+    for (int a = 0; a < 4 && !crosses; ++a)
+      for (int b = a + 1; b < 4 && !crosses; ++b) {
+        const vec3 pa = set.positions[size_t(cell[a])], pb = set.positions[size_t(cell[b])];
+        crosses = tracer.occluded(Ray{pa, pb - pa, 1e-4f, 1.0f - 1e-4f});
+      }
+    out.crossingCells += crosses ? 1u : 0u;
+  }
+  return out;
+}
+
+// ---- placement ------------------------------------------------------------------------------
+
+namespace {
+
+struct Candidate {
+  vec3 position;
+  vec3 original;
+  bool moved = false;
+  std::string why;
+};
+
+// Octree corners over one volume (Godot LightmapGI's candidates): cells split down to maxDepth
+// where a surface is within the cell's half-diagonal of its centre or where a baked punctual
+// light's visibility differs between the cell's corners. Returns corner keys in the finest
+// lattice, sorted.
+std::vector<ivec3> octreeCorners(const Scene& scene, const Tracer& tracer,
+                                 const Integrator& integrator, const Bounds3& volume, vec3 cell0,
+                                 ivec3 n0, int maxDepth, int threads,
+                                 const std::atomic<bool>* cancel) {
+  const int f = 1 << maxDepth;
+  const vec3 fine = cell0 / float(f);
+  std::vector<uint32_t> lights;
+  for (uint32_t l = 0; l < scene.lights.size(); ++l)
+    if (scene.lights[l].mode != LightMode::Realtime) lights.push_back(l);
+  auto world = [&](ivec3 k) { return volume.min + vec3(k) * fine; };
+  auto needsSplit = [&](ivec3 lo, int size) {
+    const vec3 a = world(lo), b = world(lo + ivec3(size));
+    const vec3 c = 0.5f * (a + b);
+    const float r = 0.5f * glm::length(b - a);
+    const uint64_t key = positionKey(c);
+    for (uint32_t s = 0; s < 32; ++s) {
+      const vec3 dir = squareToUniformSphere(sobol2D(s, key));
+      if (tracer.occluded(Ray{c, dir, 0.0f, r})) return true;
+    }
+    for (uint32_t l : lights) {
+      float vmin = kInfinity, vmax = -kInfinity;
+      for (int k = 0; k < 8; ++k) {
+        const vec3 p = world(lo + ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1) * size);
+        const float v = luminance(integrator.lightVisibility(p, vec3(0.0f), l, key, 0));
+        vmin = std::min(vmin, v);
+        vmax = std::max(vmax, v);
+      }
+      if (vmax - vmin > 0.5f) return true;
+    }
+    return false;
+  };
+  const size_t baseCells = size_t(n0.x) * size_t(n0.y) * size_t(n0.z);
+  std::vector<std::vector<ivec3>> perCell(baseCells);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 4;
+  options.cancel = cancel;
+  parallelFor(
+      baseCells,
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          const ivec3 base(int(i % size_t(n0.x)), int((i / size_t(n0.x)) % size_t(n0.y)),
+                           int(i / (size_t(n0.x) * size_t(n0.y))));
+          std::vector<std::pair<ivec3, int>> stack = {{base * f, f}};
+          while (!stack.empty()) {
+            const auto [lo, size] = stack.back();
+            stack.pop_back();
+            if (size > 1 && needsSplit(lo, size)) {
+              const int h = size / 2;
+              for (int k = 0; k < 8; ++k)
+                stack.push_back({lo + ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1) * h, h});
+            } else {
+              for (int k = 0; k < 8; ++k)
+                perCell[i].push_back(lo + ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1) * size);
+            }
+          }
+        }
+      },
+      options);
+  std::vector<ivec3> all;
+  for (auto& v : perCell) all.insert(all.end(), v.begin(), v.end());
+  auto less = [](const ivec3& a, const ivec3& b) {
+    return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x);
+  };
+  std::sort(all.begin(), all.end(), less);
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+  return all;
+}
+
+}  // namespace
+
+std::vector<vec3> ProbePlacement::positions() const {
+  std::vector<vec3> out;
+  out.reserve(probes.size());
+  for (const PlacedProbe& p : probes) out.push_back(p.position);
+  return out;
+}
+
+Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
+                                   const ProbePlacementSettings& settings,
+                                   const std::atomic<bool>* cancel) {
+  const auto start = std::chrono::steady_clock::now();
+  if (settings.budget < 4) return Error{"placement: budget must be at least 4"};
+  if (settings.maxDepth < 0 || settings.maxDepth > 6)
+    return Error{"placement: maxDepth must be in [0, 6]"};
+  if (settings.candidateRays == 0 || settings.checkPoints == 0)
+    return Error{"placement: candidateRays and checkPoints must be positive"};
+  for (size_t i = 0; i < settings.volumes.size(); ++i) {
+    const Bounds3& b = settings.volumes[i];
+    if (!isFinite(b.min) || !isFinite(b.max) || volumeOf(b) <= 0.0f)
+      return Error{"placement: volumes[" + std::to_string(i) + "]: empty or not finite"};
+  }
+  const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
+  float totalVolume = 0.0f;
+  for (const Bounds3& b : volumes) totalVolume += volumeOf(b);
+  if (!(totalVolume > 0.0f)) return Error{"placement: the scene bounds are empty"};
+  const float spacing =
+      settings.spacing > 0.0f ? settings.spacing : std::cbrt(totalVolume / float(settings.budget));
+  auto isCancelled = [&] { return cancel && cancel->load(); };
+
+  ProbeBakeSettings bake = settings.bake;
+  bake.rays = settings.candidateRays;
+  bake.threads = settings.threads;
+  const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, bake));
+
+  // 1. Candidates: octree corners, relocated.
+  std::vector<vec3> raw;
+  const int f = 1 << settings.maxDepth;
+  for (const Bounds3& b : volumes) {
+    const vec3 e = b.extent();
+    ivec3 n0;
+    for (int k = 0; k < 3; ++k) n0[k] = std::max(1, int(std::ceil(e[k] / spacing - 1e-4f)));
+    const vec3 cell0 = e / vec3(n0);
+    for (const ivec3& k : octreeCorners(scene, tracer, integrator, b, cell0, n0,
+                                        settings.maxDepth, settings.threads, cancel))
+      raw.push_back(b.min + vec3(k) * cell0 / float(f));
+  }
+  if (isCancelled()) return Error{"cancelled"};
+  const std::vector<RelocatedPoint> relocated =
+      relocateAll(scene, tracer, raw, settings.validity, volumes, settings.threads, cancel);
+  if (isCancelled()) return Error{"cancelled"};
+  ProbePlacement result;
+  std::vector<Candidate> candidates;
+  {
+    std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
+    for (size_t i = 0; i < raw.size(); ++i) {
+      const RelocatedPoint& r = relocated[i];
+      if (!r.valid) {
+        ++result.candidatesDropped;
+        continue;
+      }
+      if (!seen.insert(quantize(r.position, 0.5f * settings.validity.minSurfaceDistance)).second)
+        continue;
+      candidates.push_back(Candidate{r.position, raw[i], r.moved, r.why});
+      result.candidatesMoved += r.moved ? 1u : 0u;
+    }
+  }
+  result.candidates = uint32_t(candidates.size());
+  if (candidates.size() < 4) return Error{"placement: fewer than 4 valid candidates"};
+
+  // 2. Cheap bakes of candidates and check points (the same estimator for both).
+  std::vector<vec3> candidatePositions;
+  for (const Candidate& c : candidates) candidatePositions.push_back(c.position);
+  ProbeBakeSettings candidateBake = bake;
+  candidateBake.seed = hashValues(settings.seed, kCandidateTag);
+  std::vector<ShL2Rgb> candidateSh;
+  {
+    Progress progress("placement candidates", candidatePositions.size(), "probes",
+                      settings.showProgress);
+    candidateSh =
+        bakePointSh(scene, tracer, candidatePositions, candidateBake, &progress, cancel);
+    progress.finish();
+  }
+  if (candidateSh.empty()) return Error{"cancelled"};
+  const std::vector<vec3> checks =
+      randomValidPoints(scene, tracer, volumes, settings.checkPoints,
+                        hashValues(settings.seed, kCheckPointTag), settings.validity,
+                        settings.threads);
+  if (checks.empty()) return Error{"placement: no valid check points in the volumes"};
+  result.checkPoints = uint32_t(checks.size());
+  ProbeBakeSettings truthBake = bake;
+  truthBake.seed = hashValues(settings.seed, kTruthTag);
+  const std::vector<ShL2Rgb> truth = bakePointSh(scene, tracer, checks, truthBake, nullptr, cancel);
+  if (truth.empty()) return Error{"cancelled"};
+  double meanRms = 0.0;
+  for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
+  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
+
+  // 3. Refinement over index sets into `candidates`.
+  std::string topologyError;
+  auto evaluate = [&](const std::vector<uint32_t>& sel) -> std::optional<FieldError> {
+    std::vector<vec3> pos;
+    pos.reserve(sel.size());
+    for (uint32_t i : sel) pos.push_back(candidates[i].position);
+    Result<ProbeSet> set = buildProbeTopology(pos, ProbeTopologySettings{});
+    if (!set) {
+      topologyError = set.error();
+      return std::nullopt;
+    }
+    for (size_t k = 0; k < sel.size(); ++k) set->sh[k] = candidateSh[sel[k]];
+    return measureFieldError(*set, checks, truth, floor, settings.threads);
+  };
+
+  // Start: the candidates nearest the cells' centres of a coarse lattice of about `initial`
+  // cells (a small uniform grid snapped to valid candidates). Farthest-point sampling would
+  // start from the volumes' corners, all of them against walls.
+  std::vector<uint32_t> snapshotsLeft = settings.snapshotCounts;
+  std::sort(snapshotsLeft.begin(), snapshotsLeft.end());
+  uint32_t initial = std::max(8u, settings.budget / 10u);
+  if (!snapshotsLeft.empty()) initial = std::min(initial, std::max(4u, snapshotsLeft.front()));
+  initial = std::min({initial, settings.budget, uint32_t(candidates.size())});
+  std::vector<uint32_t> selected;
+  std::vector<uint8_t> inSet(candidates.size(), 0), rejected(candidates.size(), 0);
+  for (float h = std::cbrt(totalVolume / float(initial)); selected.size() < 4; h *= 0.8f) {
+    selected.clear();
+    std::fill(inSet.begin(), inSet.end(), 0);
+    for (const Bounds3& b : volumes) {
+      const vec3 e = b.extent();
+      ivec3 n;
+      for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
+      // Cell centres only: seeding the volume's corners as well covers more of the volume
+      // with the start hull (better in the open courtyard) but, in a closed building whose
+      // bounds include the thin shell outside its walls, starts from sunlit probes outside
+      // that leak into the rooms (measured: docs/probe_placement.md).
+      std::vector<vec3> targets;
+      for (int z = 0; z < n.z; ++z)
+        for (int y = 0; y < n.y; ++y)
+          for (int x = 0; x < n.x; ++x)
+            targets.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
+      for (const vec3& c : targets) {
+        if (selected.size() >= settings.budget) break;
+        uint32_t nearest = 0;
+        float nearestDistance = kInfinity;
+        for (uint32_t i = 0; i < candidates.size(); ++i) {
+          const float d = glm::length(candidates[i].position - c);
+          if (d < nearestDistance) nearestDistance = d, nearest = i;
+        }
+        if (!inSet[nearest]) {
+          inSet[nearest] = 1;
+          selected.push_back(nearest);
+        }
+      }
+    }
+    if (h < 1e-3f) break;
+  }
+  if (selected.size() < 4) return Error{"placement: fewer than 4 distinct start probes"};
+  std::optional<FieldError> current = evaluate(selected);
+  if (!current) return Error{"placement: " + topologyError};
+  result.initialError = current->mean;
+  result.errorHistory.push_back(current->mean);
+  auto takeSnapshots = [&] {
+    while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
+      std::vector<vec3> pos;
+      for (uint32_t i : selected) pos.push_back(candidates[i].position);
+      result.snapshots.push_back(std::move(pos));
+      result.snapshotCounts.push_back(uint32_t(selected.size()));
+      snapshotsLeft.erase(snapshotsLeft.begin());
+    }
+  };
+  takeSnapshots();
+
+  // The nearest candidate to p not in the set, preferring one that sees p (a probe on the
+  // far side of a wall does not fix the error at p).
+  auto nearestCandidate = [&](vec3 p, const std::vector<uint32_t>& exclude) -> int64_t {
+    std::vector<std::pair<float, uint32_t>> near;
+    for (uint32_t i = 0; i < candidates.size(); ++i) {
+      if (inSet[i] || rejected[i]) continue;
+      if (std::find(exclude.begin(), exclude.end(), i) != exclude.end()) continue;
+      near.push_back({glm::length(candidates[i].position - p), i});
+    }
+    if (near.empty()) return -1;
+    const size_t k = std::min<size_t>(16, near.size());
+    std::partial_sort(near.begin(), near.begin() + ptrdiff_t(k), near.end());
+    for (size_t j = 0; j < k; ++j) {
+      const vec3 q = candidates[near[j].second].position;
+      if (!tracer.occluded(Ray{p, q - p, 1e-4f, 1.0f - 1e-4f})) return near[j].second;
+    }
+    return near[0].second;
+  };
+
+  const float exclusion = 0.5f * spacing;
+  const float reach = settings.candidateReach * spacing;
+  std::vector<uint8_t> spawnedFrom(checks.size(), 0);
+  // Growth always adds (one probe rarely helps on its own: it changes the triangulation
+  // around it, and the walls between a few probes need several on each side); the best set
+  // seen is kept, so the result never has a higher check error than the start.
+  std::vector<uint32_t> bestSelected = selected;
+  FieldError best = *current;
+  auto grow = [&]() {
+    while (selected.size() < settings.budget && best.mean > settings.targetError &&
+           !isCancelled()) {
+      uint32_t batch = std::max(1u, uint32_t(std::lround(settings.batchFraction *
+                                                          float(selected.size()))));
+      batch = std::min(batch, settings.budget - uint32_t(selected.size()));
+      if (!snapshotsLeft.empty() && snapshotsLeft.front() > selected.size())
+        batch = std::min(batch, snapshotsLeft.front() - uint32_t(selected.size()));
+      std::vector<uint32_t> order(checks.size());
+      std::iota(order.begin(), order.end(), 0u);
+      std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+        return current->perPoint[a] > current->perPoint[b];
+      });
+      std::vector<uint32_t> picks;
+      std::vector<vec3> pickPositions, spawned;
+      for (uint32_t j : order) {
+        if (picks.size() >= batch || current->perPoint[j] <= 0.0f) break;
+        bool covered = false;
+        for (const vec3& q : pickPositions)
+          covered = covered || glm::length(q - checks[j]) < exclusion;
+        if (covered) continue;
+        const int64_t c = nearestCandidate(checks[j], picks);
+        // No candidate near the bad point (open air, where the octree is coarse): a new
+        // probe at the point itself (it is valid: check points are), baked below. Each
+        // check point spawns at most one.
+        if ((c < 0 || glm::length(candidates[size_t(c)].position - checks[j]) > reach) &&
+            !spawnedFrom[j]) {
+          spawnedFrom[j] = 1;
+          picks.push_back(uint32_t(candidates.size() + spawned.size()));
+          spawned.push_back(checks[j]);
+          pickPositions.push_back(checks[j]);
+        } else if (c >= 0) {
+          picks.push_back(uint32_t(c));
+          pickPositions.push_back(candidates[size_t(c)].position);
+        }
+      }
+      if (picks.empty()) break;
+      if (!spawned.empty()) {
+        ProbeBakeSettings spawnBake = candidateBake;
+        spawnBake.seed = hashValues(settings.seed, kSpawnTag, result.rounds);
+        const std::vector<ShL2Rgb> sh =
+            bakePointSh(scene, tracer, spawned, spawnBake, nullptr, cancel);
+        if (sh.empty()) break;  // cancelled
+        for (size_t k = 0; k < spawned.size(); ++k) {
+          candidates.push_back(Candidate{spawned[k], spawned[k], false, ""});
+          candidateSh.push_back(sh[k]);
+          inSet.push_back(0);
+          rejected.push_back(0);
+        }
+        result.spawned += uint32_t(spawned.size());
+      }
+      std::vector<uint32_t> trial = selected;
+      trial.insert(trial.end(), picks.begin(), picks.end());
+      std::optional<FieldError> e = evaluate(trial);
+      if (!e) {
+        for (uint32_t c : picks) rejected[c] = 1;  // degenerate topology: try others
+        continue;
+      }
+      for (uint32_t c : picks) inSet[c] = 1;
+      selected = std::move(trial);
+      current = std::move(e);
+      ++result.rounds;
+      if (current->mean <= best.mean) {
+        best = *current;
+        bestSelected = selected;
+        result.errorHistory.push_back(best.mean);
+      }
+      // Snapshot s: the best set of at most s probes.
+      while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
+        std::vector<vec3> pos;
+        for (uint32_t i : bestSelected) pos.push_back(candidates[i].position);
+        result.snapshots.push_back(std::move(pos));
+        result.snapshotCounts.push_back(uint32_t(bestSelected.size()));
+        snapshotsLeft.erase(snapshotsLeft.begin());
+      }
+    }
+    selected = bestSelected;
+    current = best;
+    std::fill(inSet.begin(), inSet.end(), 0);
+    for (uint32_t i : selected) inSet[i] = 1;
+  };
+  grow();
+
+  // Prune: try removing the probes that differ least from their neighbours' mean; keep a
+  // removal only when the error does not rise. Then grow again into the freed budget.
+  for (int cycle = 0; settings.prune && cycle < 2 && !isCancelled(); ++cycle) {
+    if (selected.size() <= 5) break;
+    std::vector<std::pair<float, uint32_t>> redundancy;
+    for (size_t k = 0; k < selected.size(); ++k) {
+      const vec3 p = candidates[selected[k]].position;
+      std::vector<std::pair<float, size_t>> near;
+      for (size_t m = 0; m < selected.size(); ++m)
+        if (m != k) near.push_back({glm::length(candidates[selected[m]].position - p), m});
+      const size_t kn = std::min<size_t>(4, near.size());
+      std::partial_sort(near.begin(), near.begin() + ptrdiff_t(kn), near.end());
+      ShL2Rgb mean;
+      for (size_t j = 0; j < kn; ++j) mean += candidateSh[selected[near[j].second]] * (1.0f / kn);
+      redundancy.push_back(
+          {relativeIrradianceError(candidateSh[selected[k]], mean, floor), selected[k]});
+    }
+    std::stable_sort(redundancy.begin(), redundancy.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    const size_t trials = std::min<size_t>(64, selected.size() / 4);
+    uint32_t removed = 0;
+    for (size_t t = 0; t < trials && selected.size() > 5 && !isCancelled(); ++t) {
+      const uint32_t victim = redundancy[t].second;
+      std::vector<uint32_t> trial;
+      for (uint32_t i : selected)
+        if (i != victim) trial.push_back(i);
+      std::optional<FieldError> e = evaluate(trial);
+      if (e && e->mean <= current->mean) {
+        selected = std::move(trial);
+        inSet[victim] = 0;
+        rejected[victim] = 1;  // do not add it straight back
+        current = std::move(e);
+        best = *current;
+        bestSelected = selected;
+        result.errorHistory.push_back(current->mean);
+        ++removed;
+      }
+    }
+    result.pruned += removed;
+    if (removed == 0) break;
+    grow();
+  }
+  if (isCancelled()) return Error{"cancelled"};
+
+  result.estimatedError = current->mean;
+  result.estimatedError95 = current->p95;
+  std::sort(selected.begin(), selected.end());
+  for (uint32_t i : selected) {
+    const Candidate& c = candidates[i];
+    result.probes.push_back(PlacedProbe{c.position, c.original, c.moved, c.why});
+  }
+  result.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace kiln

@@ -1,0 +1,188 @@
+// probe_placement.h: automatic light-probe placement driven by lighting error, and the
+// baselines and measurements it is judged by (docs/probe_placement.md).
+//
+// 1. Candidates: the corners of an octree over the placement volumes (Godot LightmapGI puts
+//    probes on octree corners near geometry), whose cells split where geometry is near (ray
+//    distance probing) or where a punctual light's visibility changes across the cell (shadow
+//    boundaries in open air, which distance to geometry alone does not see).
+// 2. Validity (DDGI, Majercik et al. 2019; Unity APV): a point whose rays mostly hit back
+//    faces is inside geometry and is moved out through the nearest back face; a point closer
+//    than minSurfaceDistance to a surface is pushed away along that surface's normal; a point
+//    that still fails after a few moves is dropped.
+// 3. Refinement: every candidate and a set of random check points are baked cheaply once
+//    (same rays and integrator, so SH truncation and bias cancel in the comparison); starting
+//    from a farthest-point subset, rounds add the candidates nearest (and visible from) the
+//    check points where the tetrahedral interpolation (Cupisz 2012) is worst, and a prune
+//    pass removes probes whose removal does not raise the error. A round that would raise
+//    the error is rejected, so the measured error never increases.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "kiln/probe_set.h"
+#include "probes/probe_baker.h"
+#include "src/math.h"
+#include "src/progress.h"
+#include "src/result.h"
+#include "src/scene.h"
+#include "src/tracer.h"
+
+namespace kiln {
+
+// How a point is judged valid for a probe (or a dynamic object's centre).
+struct ProbeValiditySettings {
+  // Closer than this to any surface (metres, ray estimate) is invalid.
+  float minSurfaceDistance = 0.1f;
+  // Share of rays hitting back faces of single-sided surfaces above which a point is inside.
+  float invalidBackfaceRatio = 0.25f;
+  uint32_t rays = 96;  // directions probed per point (a Sobol set keyed by the position)
+  int maxMoves = 4;    // relocation attempts before a point is dropped
+};
+
+// What rays see from a point.
+struct PointProbe {
+  float backfaceRatio = 0.0f;
+  float nearestDistance = kInfinity;  // nearest hit of any kind (upper bound of the distance)
+  vec3 nearestBackDirection{0.0f};     // unit ray direction of the nearest back-face hit
+  float nearestBackDistance = kInfinity;
+  vec3 nearestNormal{0.0f};  // unit normal of the nearest hit surface, facing the point
+  float nearestPlaneDistance = kInfinity;  // distance to the nearest hit's plane
+};
+PointProbe probePoint(const Scene& scene, const Tracer& tracer, vec3 p, uint32_t rays);
+
+// True when p is neither inside geometry nor within minSurfaceDistance of a surface.
+bool isValidProbePoint(const Scene& scene, const Tracer& tracer, vec3 p,
+                       const ProbeValiditySettings& settings);
+
+// A point after relocation: its final position, whether it moved and why, or dropped.
+struct RelocatedPoint {
+  vec3 position{0.0f};
+  bool valid = false;  // false = dropped
+  bool moved = false;
+  std::string why;  // "" when untouched, else what was done (or why it was dropped)
+};
+// When `volumes` is not empty, a point that ends outside all of them is dropped too (a probe
+// pushed out of a building's outer wall would sit in the sun and leak it inside).
+RelocatedPoint relocateProbePoint(const Scene& scene, const Tracer& tracer, vec3 p,
+                                  const ProbeValiditySettings& settings,
+                                  std::span<const Bounds3> volumes = {});
+
+// The volumes where probes go: `volumes` when given, else the bounds of the static objects.
+std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds3> volumes);
+
+// `count` random valid points, uniform over the volumes (by volume), rejection-sampled (no
+// relocation). Deterministic for a seed at any thread count. Fewer points come back only when
+// the volumes are almost entirely invalid.
+std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
+                                    std::span<const Bounds3> volumes, uint32_t count,
+                                    uint64_t seed, const ProbeValiditySettings& validity,
+                                    int threads = 0);
+
+// A uniform grid baseline with exactly `count` probes (or an error): the lattice spacing is
+// searched so that, after the same relocation as automatic placement (Unity APV also moves
+// invalid probes), at least `count` valid points remain; the surplus is removed evenly
+// (every k-th in lattice order). Needs count >= 4.
+Result<std::vector<vec3>> uniformGridPositions(const Scene& scene, const Tracer& tracer,
+                                               std::span<const Bounds3> volumes, uint32_t count,
+                                               const ProbeValiditySettings& validity,
+                                               int threads = 0);
+
+struct ProbePlacementSettings {
+  std::vector<Bounds3> volumes;  // empty = the bounds of the static objects
+  uint32_t budget = 256;         // most probes placed (>= 4)
+  float targetError = 0.0f;      // stop when the mean relative check error is <= this (0: off)
+  // Base octree spacing in metres; 0 = (volume / budget)^(1/3), so the coarse lattice alone
+  // would hold about `budget` points.
+  float spacing = 0.0f;
+  int maxDepth = 2;  // octree levels below the base spacing near geometry/shadow edges
+  ProbeValiditySettings validity;
+  uint32_t candidateRays = 1024;  // rays per cheap bake (candidates and check points)
+  uint32_t checkPoints = 2048;   // training check points (a different seed than evaluations)
+  float batchFraction = 0.08f;   // probes added per round, as a fraction of the current count
+  // A bad check point farther than this x spacing from every free candidate gets a probe
+  // of its own (open air, where the octree is coarse); 0 = always a new probe, large = never.
+  float candidateReach = 0.25f;
+  bool prune = true;
+  // Probe sets recorded while growing (before pruning) when the count first reaches each of
+  // these: one run yields the error-versus-count curve.
+  std::vector<uint32_t> snapshotCounts;
+  uint64_t seed = 0;
+  ProbeBakeSettings bake;  // integrator settings of the cheap bakes (rays are candidateRays)
+  int threads = 0;
+  bool showProgress = false;  // progress lines on stderr for the bakes
+};
+
+// One placed probe with its note.
+struct PlacedProbe {
+  vec3 position{0.0f};
+  vec3 candidate{0.0f};  // where the candidate was before relocation
+  bool moved = false;
+  std::string why;  // what relocation did ("" = untouched)
+};
+
+struct ProbePlacement {
+  std::vector<PlacedProbe> probes;
+  std::vector<std::vector<vec3>> snapshots;  // one per reached snapshotCounts entry
+  std::vector<uint32_t> snapshotCounts;      // the counts actually recorded
+  // Report.
+  uint32_t candidates = 0;          // after validity
+  uint32_t candidatesMoved = 0;     // relocated candidates
+  uint32_t candidatesDropped = 0;   // invalid and not relocatable
+  uint32_t checkPoints = 0;
+  uint32_t spawned = 0;             // probes added at check points (no candidate near)
+  float initialError = 0.0f;        // mean relative error on the check points, first set
+  float estimatedError = 0.0f;      // ... final set
+  float estimatedError95 = 0.0f;    // 95th percentile, final set
+  std::vector<float> errorHistory;  // mean check error after every accepted step
+  uint32_t rounds = 0, pruned = 0;
+  double seconds = 0.0;
+  std::vector<vec3> positions() const;
+};
+
+// Places probes (see the file comment). Errors: bad settings, no valid candidates, topology
+// failure, "cancelled". Deterministic for a seed at any thread count.
+Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
+                                   const ProbePlacementSettings& settings,
+                                   const std::atomic<bool>* cancel = nullptr);
+
+// Relative irradiance error at a point: the RMS over the six axis normals of the luminance
+// difference of E, divided by max(RMS of the true E, floor). `floor` keeps near-black
+// points, whose baked truth is itself mostly noise, from dominating: callers use
+// kErrorFloorFraction x the mean true RMS over their points (an error is then relative to the
+// point's own light, or to 5% of the scene's typical light where the point is darker).
+inline constexpr float kErrorFloorFraction = 0.05f;
+float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
+// RMS over the six axis normals of the luminance of E.
+float irradianceRms(const ShL2Rgb& sh);
+
+// Interpolation error of a probe field at check points, against SH baked at the points.
+struct FieldError {
+  float mean = 0.0f, p95 = 0.0f, max = 0.0f;
+  std::vector<float> perPoint;
+};
+// `set` must be complete (topology + SH). `truth[i]` is the SH baked at points[i].
+FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
+                             std::span<const ShL2Rgb> truth, float floor, int threads = 0);
+
+// SH baked at each point with bakeProbe (the probe bake's estimator), keyed by
+// hashValues(seed, i). Used as ground truth at check points.
+// Returns an empty vector when cancelled.
+std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
+                                 std::span<const vec3> points, const ProbeBakeSettings& settings,
+                                 Progress* progress = nullptr,
+                                 const std::atomic<bool>* cancel = nullptr);
+
+// Leak exposure of a topology: inner cells with at least one edge blocked by geometry (an
+// opaque or translucent surface between two of its probes), which can blend light through it.
+struct CellCrossing {
+  uint32_t innerCells = 0;
+  uint32_t crossingCells = 0;
+};
+CellCrossing countCellsCrossingGeometry(const Tracer& tracer, const ProbeSet& set);
+
+}  // namespace kiln

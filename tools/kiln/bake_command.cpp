@@ -1,0 +1,286 @@
+// bake_command.cpp: `kiln bake SCENE --out DIR`, the lightmap bake. Thin over
+// lightmap/lightmap_baker.h (the bake) and lightmap/lightmap_writer.h (the files). Settings
+// come from the defaults, then the quality preset (--preset, else the scene's
+// extras.kiln.quality), then the scene's extras.kiln, then the command line: the command line
+// wins. Outputs and their formats: docs/lightmap_outputs.md.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+
+#include "lightmap/atlas.h"
+#include "lightmap/lightmap_baker.h"
+#include "lightmap/lightmap_writer.h"
+#include "lightmap/uv_unwrap.h"
+#include "src/progress.h"
+#include "tools/kiln/cli_common.h"
+
+#ifndef KILN_VERSION
+#define KILN_VERSION "0.1.0"
+#endif
+
+namespace kiln::cli {
+namespace {
+
+using Json = nlohmann::json;
+
+// The shell's convention for a process stopped by SIGINT (128 + 2).
+constexpr int kExitInterrupted = 130;
+
+struct BakeOptions {
+  std::string scene;
+  std::string out;
+  std::string preset;
+  std::optional<int> samples;
+  std::optional<float> resolution;
+  std::optional<int> maxSize;
+  std::optional<int> padding;
+  std::optional<int> bounces;
+  std::optional<uint64_t> seed;
+  int threads = 0;
+  bool noDenoise = false;
+  bool ao = false;
+  std::string ldr;
+  std::string lockAtlas;
+  std::string lightingMode;
+  bool directional = false;
+  bool quiet = false;
+};
+
+std::string humanCount(double n) {
+  char buf[32];
+  if (n >= 1e9)
+    std::snprintf(buf, sizeof buf, "%.2fG", n / 1e9);
+  else if (n >= 1e6)
+    std::snprintf(buf, sizeof buf, "%.2fM", n / 1e6);
+  else if (n >= 1e3)
+    std::snprintf(buf, sizeof buf, "%.1fk", n / 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "%.0f", n);
+  return buf;
+}
+
+// The scene's extras.kiln settings that the lightmap bake uses. Returns an exit code.
+int applySceneSettings(const Scene& scene, LightmapBakeSettings& b) {
+  const SceneSettings& s = scene.settings;
+  if (s.lightingMode) {
+    Result<LightingMode> mode = parseLightingMode(*s.lightingMode);
+    if (!mode) {
+      printError(scene.path + ": extras.kiln.lightingMode: " + mode.error());
+      return kExitBadInput;
+    }
+    b.lightingMode = *mode;
+  }
+  if (s.directionalMode) {
+    b.directional = *s.directionalMode != "non-directional";
+    if (*s.directionalMode == "sh")
+      printWarning(scene.path + ": extras.kiln.directionalMode \"sh\": L1 SH lightmaps are not "
+                   "baked yet; baking \"directional\" instead");
+  }
+  if (s.lightmapResolution) b.resolution = *s.lightmapResolution;
+  if (s.lightmapPadding) b.padding = *s.lightmapPadding;
+  if (s.lightmapMaxSize) b.maxSize = *s.lightmapMaxSize;
+  if (s.bounces) b.bounces = *s.bounces;
+  if (s.albedoBoost) b.albedoBoost = *s.albedoBoost;
+  if (s.indirectIntensity) b.indirectIntensity = *s.indirectIntensity;
+  if (s.ambientOcclusion) b.ambientOcclusion = *s.ambientOcclusion;
+  if (s.aoMaxDistance) b.aoMaxDistance = *s.aoMaxDistance;
+  if (s.aoAmount) b.aoAmount = *s.aoAmount;
+  return kExitOk;
+}
+
+// --lock-atlas: the earlier bake's layout for this scene. The atlas settings come from that
+// manifest (a different resolution would generate different UVs), so the command line may
+// not contradict them. Returns an exit code.
+int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& settings) {
+  std::ifstream in(o.lockAtlas, std::ios::binary);
+  if (!in) {
+    printError(o.lockAtlas + ": cannot open the --lock-atlas manifest");
+    return kExitBadInput;
+  }
+  Json manifest;
+  try {
+    manifest = Json::parse(in);
+  } catch (const Json::exception& e) {
+    printError(o.lockAtlas + ": malformed JSON: " + e.what());
+    return kExitBadInput;
+  }
+  if (manifest.is_object() && manifest.contains("settings") && manifest["settings"].is_object()) {
+    const Json& s = manifest["settings"];
+    auto take = [&](const char* key, const char* option, auto given, auto& field) -> bool {
+      if (!s.contains(key) || !s[key].is_number()) return true;
+      using T = std::decay_t<decltype(field)>;
+      const T locked = s[key].get<T>();
+      if (given && *given != locked) {
+        std::ostringstream msg;
+        msg << option << " " << *given << " contradicts --lock-atlas " << o.lockAtlas << " ("
+            << key << " " << locked << "); leave it out to use the locked atlas";
+        printError(msg.str());
+        return false;
+      }
+      field = locked;
+      return true;
+    };
+    if (!take("resolution", "--resolution", o.resolution, settings.resolution) ||
+        !take("padding", "--padding", o.padding, settings.padding) ||
+        !take("maxSize", "--max-size", o.maxSize, settings.maxSize))
+      return kExitBadUsage;
+  }
+  // The manifest's texel rectangles are recovered from the objects' UV1 bounds, so objects
+  // whose UVs kiln generates need them generated first, exactly as the bake will.
+  // Same unwrap settings as bakeLightmaps (lightmap_baker.cpp: gutter = max(1, padding)).
+  Scene unwrapped = scene;
+  UnwrapSettings unwrap;
+  unwrap.gutterTexels = std::max(1, settings.padding);
+  Result<std::vector<std::optional<UnwrapResult>>> uvs =
+      generateMissingLightmapUvs(unwrapped, settings.resolution, unwrap);
+  if (!uvs) {
+    printError(scene.path + ": " + uvs.error());
+    return kExitBadInput;
+  }
+  Result<AtlasLayout> layout = atlasFromManifest(manifest, unwrapped);
+  if (!layout) {
+    printError(o.lockAtlas + ": " + layout.error());
+    return kExitBadInput;
+  }
+  settings.lockedAtlas = std::move(layout).value();
+  return kExitOk;
+}
+
+int runBake(const BakeOptions& o) {
+  const auto start = std::chrono::steady_clock::now();
+  Scene scene;
+  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+
+  LightmapBakeSettings settings;
+  std::string preset = o.preset;
+  if (preset.empty() && scene.settings.quality) preset = *scene.settings.quality;
+  if (!preset.empty()) {
+    if (Status s = applyLightmapPreset(preset, settings); !s) {
+      // --preset is checked by CLI11, so a bad name here came from the scene.
+      printError(scene.path + ": extras.kiln.quality: " + s.error());
+      return kExitBadInput;
+    }
+  }
+  if (int code = applySceneSettings(scene, settings)) return code;
+  if (!o.lightingMode.empty()) settings.lightingMode = *parseLightingMode(o.lightingMode);
+  if (o.directional) settings.directional = true;
+  if (o.samples) settings.samplesPerTexel = *o.samples;
+  if (o.resolution) settings.resolution = *o.resolution;
+  if (o.maxSize) settings.maxSize = *o.maxSize;
+  if (o.padding) settings.padding = *o.padding;
+  if (o.bounces) settings.bounces = *o.bounces;
+  if (o.seed) settings.seed = *o.seed;
+  settings.threads = o.threads;
+  if (o.noDenoise) settings.denoise = false;
+  if (o.ao) settings.ambientOcclusion = true;
+
+  LightmapOutputSettings output;
+  output.outDir = o.out;
+  output.preset = preset;
+  output.kilnVersion = KILN_VERSION;
+  output.lockAtlas = o.lockAtlas;
+  if (o.ldr == "rgbm") output.ldr = LdrEncoding::Rgbm;
+  if (o.ldr == "dldr") output.ldr = LdrEncoding::Dldr;
+
+  if (!o.lockAtlas.empty())
+    if (int code = lockAtlas(o, scene, settings)) return code;
+
+  // Settings that cannot work together (each alone is range-checked by CLI11 or the loader).
+  if (settings.maxSize < 1 + 2 * settings.padding) {
+    printError("--max-size " + std::to_string(settings.maxSize) + " cannot hold one texel with " +
+               "--padding " + std::to_string(settings.padding) +
+               " on each side (needs --max-size >= 1 + 2 x padding = " +
+               std::to_string(1 + 2 * settings.padding) + ")");
+    return kExitBadUsage;
+  }
+
+  if (!o.quiet)
+    std::cerr << "kiln: baking " << scene.path << ": " << settings.resolution
+              << " texels/unit, " << settings.samplesPerTexel << " samples/texel, "
+              << settings.bounces << " bounces" << (preset.empty() ? "" : ", preset " + preset)
+              << "\n";
+  installInterruptHandler();
+  Result<LightmapBakeResult> baked = bakeLightmaps(scene, settings, !o.quiet, &cancelFlag());
+  if (cancelFlag().load()) {
+    printError("interrupted; " + o.out + " left untouched");
+    return kExitInterrupted;
+  }
+  if (!baked) {
+    printError(scene.path + ": " + baked.error());
+    return kExitBadInput;
+  }
+  const LightmapBakeResult& result = *baked;
+  if (Status s = writeLightmapOutputs(o.scene, result, settings, output); !s) {
+    printError(s.error());
+    return kExitBadInput;
+  }
+  for (const std::string& w : result.warnings) printWarning(w);
+  if (!o.quiet) {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    size_t pageTexels = 0;
+    for (const AtlasPage& p : result.layout.pages) pageTexels += size_t(p.width) * p.height;
+    const LightmapBakeStats& st = result.stats;
+    std::ostringstream line;
+    line.setf(std::ios::fixed);
+    line.precision(2);
+    line << "kiln: wrote " << o.out << ": " << result.layout.pages.size() << " lightmap page(s) ("
+         << pageTexels << " texels), " << st.texels << " baked texels (" << st.invalidTexels
+         << " invalid), " << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
+         << humanCount(st.seconds > 0 ? double(st.rays) / st.seconds : 0.0)
+         << " rays/s); total " << seconds << " s\n";
+    std::cerr << line.str();
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void registerBakeCommand(CLI::App& app) {
+  auto o = std::make_shared<BakeOptions>();
+  CLI::App* b = app.add_subcommand(
+      "bake", "Bake lightmaps: OpenEXR pages, manifest.json and a glTF that references them");
+  b->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--out,-o", o->out, "Output directory (created; files replaced atomically)")
+      ->required();
+  b->add_option("--preset", o->preset,
+                "Quality preset (default: the scene's extras.kiln.quality, else none)")
+      ->check(CLI::IsMember({"preview", "low", "medium", "high", "production"}));
+  b->add_option("--samples", o->samples, "Paths per texel (overrides the preset)")
+      ->check(CLI::Range(1, 1 << 24));
+  b->add_option("--resolution", o->resolution,
+                "Texels per world unit, before each object's scaleInLightmap")
+      ->check(CLI::Range(1e-6f, 1e5f));
+  b->add_option("--max-size", o->maxSize, "Largest lightmap page side, texels (default 1024)")
+      ->check(CLI::Range(1, 16384));
+  b->add_option("--padding", o->padding, "Empty texels around every object (default 2)")
+      ->check(CLI::Range(0, 256));
+  b->add_option("--bounces", o->bounces, "Indirect bounces (default 3)")
+      ->check(CLI::Range(0, 1024));
+  b->add_option("--seed", o->seed, "Seed of every random number (default 0)");
+  b->add_option("--threads", o->threads, "Worker threads (0 = all cores; output is the same)")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  b->add_flag("--no-denoise", o->noDenoise, "Skip the edge-aware denoiser");
+  b->add_flag("--ao", o->ao, "Also bake ambient occlusion (lightmap-<i>_ao.exr)");
+  b->add_option("--ldr", o->ldr, "Also write 8-bit PNGs: rgbm or dldr (decode: docs)")
+      ->check(CLI::IsMember({"rgbm", "dldr"}));
+  b->add_option("--lock-atlas", o->lockAtlas,
+                "Reuse the atlas of an earlier bake's manifest.json (same scene)");
+  b->add_option("--lighting-mode", o->lightingMode,
+                "Mixed lights: baked-indirect, shadowmask or subtractive (docs/mixed_lighting.md)")
+      ->check(CLI::IsMember({"baked-indirect", "shadowmask", "subtractive"}));
+  b->add_flag("--directional", o->directional,
+              "Also bake the dominant light direction (lightmap-<i>_direction.exr)");
+  b->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
+  b->callback(commandCallback([o]() { return runBake(*o); }));
+}
+
+}  // namespace kiln::cli

@@ -1,0 +1,413 @@
+// probes_place_command.cpp: `kiln probes place` (automatic probe placement, writes the JSON
+// that `kiln probes bake --positions` reads) and `kiln probes compare-placement` (the
+// rerunnable comparison of automatic placement against a uniform grid). Thin over
+// probes/probe_placement.h. Usage, algorithm and measurements: docs/probe_placement.md.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "probes/probe_baker.h"
+#include "probes/probe_placement.h"
+#include "src/progress.h"
+#include "src/tracer.h"
+#include "tools/kiln/cli_common.h"
+
+namespace kiln::cli {
+namespace {
+
+using Json = nlohmann::json;
+
+Json vecJson(vec3 v) { return Json::array({v.x, v.y, v.z}); }
+
+Status writeText(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return Error{path + ": cannot open for writing"};
+    out << text;
+    out.close();
+    if (!out) {
+      std::remove(tmp.c_str());
+      return Error{path + ": write failed"};
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    return Error{path + ": " + ec.message()};
+  }
+  return Status::success();
+}
+
+// "minx,miny,minz,maxx,maxy,maxz" -> Bounds3.
+std::optional<Bounds3> parseVolume(const std::string& text) {
+  std::stringstream ss(text);
+  std::string item;
+  std::vector<float> v;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stof(item, &used));
+      if (used != item.size()) return std::nullopt;
+    } catch (...) {
+      return std::nullopt;
+    }
+  }
+  if (v.size() != 6) return std::nullopt;
+  Bounds3 b;
+  b.min = vec3(v[0], v[1], v[2]);
+  b.max = vec3(v[3], v[4], v[5]);
+  if (!isFinite(b.min) || !isFinite(b.max) || !(b.min.x < b.max.x && b.min.y < b.max.y &&
+                                                b.min.z < b.max.z))
+    return std::nullopt;
+  return b;
+}
+
+struct CommonOptions {
+  std::string scene;
+  std::vector<std::string> volumes;
+  float minDistance = 0.1f;
+  int rays = 1024;         // cheap bake rays
+  int checkPoints = 2048;  // training check points
+  float spacing = 0.0f;
+  int depth = 2;
+  uint64_t seed = 0;
+  int threads = 0;
+  bool quiet = false;
+};
+
+// Fills the placement settings shared by both subcommands; returns an exit code.
+int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
+  for (size_t i = 0; i < o.volumes.size(); ++i) {
+    std::optional<Bounds3> b = parseVolume(o.volumes[i]);
+    if (!b) {
+      printError("--volume " + o.volumes[i] +
+                 ": expected minx,miny,minz,maxx,maxy,maxz with min < max");
+      return kExitBadUsage;
+    }
+    s->volumes.push_back(*b);
+  }
+  s->validity.minSurfaceDistance = o.minDistance;
+  s->candidateRays = uint32_t(o.rays);
+  s->checkPoints = uint32_t(o.checkPoints);
+  s->spacing = o.spacing;
+  s->maxDepth = o.depth;
+  s->seed = o.seed;
+  s->threads = o.threads;
+  s->bake.threads = o.threads;
+  s->showProgress = !o.quiet;
+  return kExitOk;
+}
+
+void addCommonOptions(CLI::App* c, CommonOptions* o) {
+  c->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  c->add_option("--volume", o->volumes,
+                "minx,miny,minz,maxx,maxy,maxz (repeatable); default: the static objects' bounds");
+  c->add_option("--min-distance", o->minDistance, "Closest a probe may be to a surface (m)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  c->add_option("--rays", o->rays, "Rays per cheap bake (candidates and check points)")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  c->add_option("--check-points", o->checkPoints, "Training check points")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  c->add_option("--spacing", o->spacing, "Base octree spacing in m (0 = from the budget)")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--depth", o->depth, "Octree levels below the base spacing")
+      ->check(CLI::Range(0, 6))
+      ->capture_default_str();
+  c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
+  c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")
+      ->check(CLI::NonNegativeNumber);
+  c->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
+}
+
+struct LoadedScene {
+  Scene scene;
+  std::unique_ptr<Tracer> tracer;
+};
+
+int loadTraced(const std::string& path, LoadedScene* out) {
+  if (int code = loadSceneOrReport(path, LoadOptions{}, &out->scene)) return code;
+  Result<std::unique_ptr<Tracer>> tracer = Tracer::create(out->scene);
+  if (!tracer) {
+    printError(path + ": " + tracer.error());
+    return kExitBadInput;
+  }
+  out->tracer = std::move(tracer).value();
+  return kExitOk;
+}
+
+// ---- place ---------------------------------------------------------------------------------
+
+struct PlaceOptions {
+  CommonOptions common;
+  std::string out;
+  int budget = 256;
+  float targetError = 0.0f;
+  bool noPrune = false;
+};
+
+int runPlace(const PlaceOptions& o) {
+  ProbePlacementSettings settings;
+  if (int code = makeSettings(o.common, &settings)) return code;
+  settings.budget = uint32_t(o.budget);
+  settings.targetError = o.targetError;
+  settings.prune = !o.noPrune;
+  LoadedScene ls;
+  if (int code = loadTraced(o.common.scene, &ls)) return code;
+  installInterruptHandler();
+  Result<ProbePlacement> placed = placeProbes(ls.scene, *ls.tracer, settings, &cancelFlag());
+  if (!placed) {
+    printError(cancelFlag().load() ? "interrupted; " + o.out + " left untouched"
+                                   : o.common.scene + ": " + placed.error());
+    return kExitBadInput;
+  }
+  Json positions = Json::array(), probes = Json::array();
+  for (const PlacedProbe& p : placed->probes) {
+    positions.push_back(vecJson(p.position));
+    Json note = {{"position", vecJson(p.position)}, {"moved", p.moved}};
+    if (p.moved) {
+      note["candidate"] = vecJson(p.candidate);
+      note["why"] = p.why;
+    }
+    probes.push_back(note);
+  }
+  Json doc = {{"positions", positions},
+              {"probes", probes},
+              {"report",
+               {{"probeCount", placed->probes.size()},
+                {"candidates", placed->candidates},
+                {"candidatesMoved", placed->candidatesMoved},
+                {"candidatesDropped", placed->candidatesDropped},
+                {"checkPoints", placed->checkPoints},
+                {"spawned", placed->spawned},
+                {"initialError", placed->initialError},
+                {"estimatedError", placed->estimatedError},
+                {"estimatedError95", placed->estimatedError95},
+                {"rounds", placed->rounds},
+                {"pruned", placed->pruned},
+                {"seconds", placed->seconds}}}};
+  if (Status s = writeText(o.out, doc.dump(1) + "\n"); !s) {
+    printError(s.error());
+    return kExitBadInput;
+  }
+  if (!o.common.quiet) {
+    std::cerr << "kiln: wrote " << o.out << ": " << placed->probes.size() << " probes from "
+              << placed->candidates << " valid candidates (" << placed->candidatesMoved
+              << " moved out of or away from geometry, " << placed->candidatesDropped
+              << " dropped; " << placed->spawned
+              << " probes added at check points); estimated mean relative irradiance error "
+              << std::setprecision(3)
+              << placed->estimatedError << " (95th percentile " << placed->estimatedError95
+              << ", from " << placed->initialError << ") at " << placed->checkPoints
+              << " check points; " << placed->rounds << " rounds, " << placed->pruned
+              << " pruned; " << std::setprecision(3) << placed->seconds << " s\n";
+  }
+  return kExitOk;
+}
+
+// ---- compare-placement -----------------------------------------------------------------------
+
+struct CompareOptions {
+  CommonOptions common;
+  int count = 256;
+  int points = 1000;
+  int evalRays = 4096;
+  std::string csv;
+};
+
+struct Row {
+  std::string method;
+  size_t count = 0;
+  FieldError error;
+  float nearWall = 0.0f;  // mean over points within 0.5 m of a surface
+  CellCrossing crossing;
+  double seconds = 0.0;
+};
+
+int runCompare(const CompareOptions& o) {
+  ProbePlacementSettings settings;
+  if (int code = makeSettings(o.common, &settings)) return code;
+  settings.budget = uint32_t(o.count);
+  for (int div : {8, 6, 5, 4, 3, 2}) {
+    if (o.count / div >= 4) settings.snapshotCounts.push_back(uint32_t(o.count / div));
+  }
+  LoadedScene ls;
+  if (int code = loadTraced(o.common.scene, &ls)) return code;
+  installInterruptHandler();
+  const Scene& scene = ls.scene;
+  const Tracer& tracer = *ls.tracer;
+  const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
+
+  // Evaluation points and their ground truth: a different seed from placement's check points.
+  const uint64_t evalSeed = hashValues(o.common.seed, 0x6576616cULL);  // "eval"
+  const std::vector<vec3> points = randomValidPoints(scene, tracer, volumes, uint32_t(o.points),
+                                                     evalSeed, settings.validity, o.common.threads);
+  ProbeBakeSettings bake;
+  bake.rays = uint32_t(o.evalRays);
+  bake.seed = evalSeed;
+  bake.threads = o.common.threads;
+  bake.dering = false;  // the truth is not deringed either: compare like with like
+  bake.fillInvalid = false;
+  std::vector<ShL2Rgb> truth;
+  {
+    Progress progress("truth", points.size(), "points", !o.common.quiet);
+    truth = bakePointSh(scene, tracer, points, bake, &progress, &cancelFlag());
+    progress.finish();
+  }
+  if (truth.empty()) {
+    printError("interrupted");
+    return kExitBadInput;
+  }
+  double meanRms = 0.0;
+  for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
+  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
+  std::vector<uint8_t> nearWall(points.size());
+  for (size_t i = 0; i < points.size(); ++i)
+    nearWall[i] = probePoint(scene, tracer, points[i], 256).nearestDistance < 0.5f;
+
+  bake.seed = o.common.seed;
+  auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
+                      double seconds) -> std::optional<Row> {
+    Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, &cancelFlag());
+    if (!set) {
+      printError(method + ": " + set.error());
+      return std::nullopt;
+    }
+    Row row;
+    row.method = method;
+    row.count = positions.size();
+    row.error = measureFieldError(*set, points, truth, floor, o.common.threads);
+    double sum = 0.0;
+    size_t n = 0;
+    for (size_t i = 0; i < points.size(); ++i)
+      if (nearWall[i]) sum += row.error.perPoint[i], ++n;
+    row.nearWall = n ? float(sum / double(n)) : 0.0f;
+    row.crossing = countCellsCrossingGeometry(tracer, *set);
+    row.seconds = seconds;
+    return row;
+  };
+
+  std::vector<Row> rows;
+  auto t0 = std::chrono::steady_clock::now();
+  Result<std::vector<vec3>> grid =
+      uniformGridPositions(scene, tracer, volumes, uint32_t(o.count), settings.validity,
+                           o.common.threads);
+  if (!grid) {
+    printError(o.common.scene + ": " + grid.error());
+    return kExitBadInput;
+  }
+  const double gridSeconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::optional<Row> gridRow = evaluate("uniform grid", *grid, gridSeconds);
+  if (!gridRow) return kExitBadInput;
+  rows.push_back(*gridRow);
+
+  Result<ProbePlacement> placed = placeProbes(scene, tracer, settings, &cancelFlag());
+  if (!placed) {
+    printError(o.common.scene + ": " + placed.error());
+    return kExitBadInput;
+  }
+  for (size_t s = 0; s < placed->snapshots.size(); ++s) {
+    std::optional<Row> r = evaluate("automatic (grown)", placed->snapshots[s], 0.0);
+    if (!r) return kExitBadInput;
+    rows.push_back(*r);
+  }
+  std::optional<Row> autoRow = evaluate("automatic", placed->positions(), placed->seconds);
+  if (!autoRow) return kExitBadInput;
+  rows.push_back(*autoRow);
+
+  // The fewest automatic probes that reach the grid's error at its count.
+  size_t needed = 0;
+  for (size_t r = 1; r < rows.size(); ++r)
+    if (rows[r].error.mean <= gridRow->error.mean && (needed == 0 || rows[r].count < needed))
+      needed = rows[r].count;
+
+  std::ostringstream table;
+  table << "scene: " << o.common.scene << ", " << points.size()
+        << " random valid points, truth and probes baked with " << o.evalRays << " rays\n";
+  table << std::left << std::setw(20) << "method" << std::right << std::setw(7) << "probes"
+        << std::setw(10) << "mean" << std::setw(10) << "p95" << std::setw(10) << "max"
+        << std::setw(11) << "near-wall" << std::setw(14) << "crossing-tets" << std::setw(10)
+        << "seconds" << "\n";
+  std::ostringstream csv;
+  csv << "scene,method,probes,mean,p95,max,near_wall_mean,crossing_cells,inner_cells,seconds\n";
+  for (const Row& r : rows) {
+    table << std::left << std::setw(20) << r.method << std::right << std::setw(7) << r.count
+          << std::fixed << std::setprecision(4) << std::setw(10) << r.error.mean << std::setw(10)
+          << r.error.p95 << std::setw(10) << r.error.max << std::setw(11) << r.nearWall
+          << std::setw(8) << r.crossing.crossingCells << "/" << std::setw(5) << std::left
+          << r.crossing.innerCells << std::right << std::setprecision(1) << std::setw(10)
+          << r.seconds << "\n";
+    csv << std::filesystem::path(o.common.scene).filename().string() << "," << r.method << ","
+        << r.count << "," << r.error.mean << "," << r.error.p95 << "," << r.error.max << ","
+        << r.nearWall << "," << r.crossing.crossingCells << "," << r.crossing.innerCells << ","
+        << r.seconds << "\n";
+  }
+  if (needed) {
+    table << "automatic placement reaches the grid's mean error (" << std::setprecision(4)
+          << gridRow->error.mean << " at " << gridRow->count << " probes) with " << needed
+          << " probes (" << std::setprecision(2) << double(needed) / double(gridRow->count)
+          << " of the grid's count)\n";
+  } else {
+    table << "no automatic probe set reached the grid's mean error\n";
+  }
+  std::cout << table.str();
+  if (!o.csv.empty()) {
+    if (Status s = writeText(o.csv, csv.str()); !s) {
+      printError(s.error());
+      return kExitBadInput;
+    }
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void registerProbesPlaceCommand(CLI::App& probes) {
+  auto place = std::make_shared<PlaceOptions>();
+  CLI::App* p = probes.add_subcommand(
+      "place", "Place probes automatically (error-driven) and write positions JSON for bake");
+  addCommonOptions(p, &place->common);
+  p->add_option("--out,-o", place->out,
+                "Output JSON {\"positions\": [...], \"probes\": [notes], \"report\": {...}}")
+      ->required();
+  p->add_option("--budget", place->budget, "Most probes to place")
+      ->check(CLI::Range(4, 1 << 20))
+      ->capture_default_str();
+  p->add_option("--target-error", place->targetError,
+                "Stop at this mean relative irradiance error on the check points (0 = off)")
+      ->check(CLI::NonNegativeNumber);
+  p->add_flag("--no-prune", place->noPrune, "Do not remove probes that add nothing");
+  p->callback(commandCallback([place]() { return runPlace(*place); }));
+
+  auto compare = std::make_shared<CompareOptions>();
+  CLI::App* c = probes.add_subcommand(
+      "compare-placement",
+      "Automatic placement against a uniform grid: interpolated irradiance error at random "
+      "valid points, at equal counts and the count automatic needs to match the grid");
+  addCommonOptions(c, &compare->common);
+  c->add_option("--count", compare->count, "Probe count of the grid (and the budget)")
+      ->check(CLI::Range(4, 1 << 20))
+      ->capture_default_str();
+  c->add_option("--points", compare->points, "Random valid evaluation points")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  c->add_option("--eval-rays", compare->evalRays, "Rays per probe and per evaluation point")
+      ->check(CLI::Range(1, 1 << 24))
+      ->capture_default_str();
+  c->add_option("--csv", compare->csv, "Also write the table as CSV");
+  c->callback(commandCallback([compare]() { return runCompare(*compare); }));
+}
+
+}  // namespace kiln::cli

@@ -1,0 +1,187 @@
+// reference_compare.cpp: see reference_compare.h.
+#include "tools/lightmap_compare/reference_compare.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "src/image.h"
+
+namespace kiln {
+namespace {
+
+using Json = nlohmann::json;
+namespace fs = std::filesystem;
+
+Result<Json> readJson(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error{path + ": cannot open the file"};
+  try {
+    return Json::parse(in);
+  } catch (const Json::exception& e) {
+    return Error{path + ": malformed JSON: " + e.what()};
+  }
+}
+
+// Bilinear sample of an image at texture coordinate (u, v), texel centres at (i + 0.5) / size,
+// clamped at the borders.
+vec3 sampleBilinear(const Image& image, float u, float v) {
+  const float px = u * float(image.width) - 0.5f, py = v * float(image.height) - 0.5f;
+  const float fx0 = std::floor(px), fy0 = std::floor(py);
+  const float fx = px - fx0, fy = py - fy0;
+  auto clampX = [&](float x) { return std::clamp(int(x), 0, image.width - 1); };
+  auto clampY = [&](float y) { return std::clamp(int(y), 0, image.height - 1); };
+  const int x0 = clampX(fx0), x1 = clampX(fx0 + 1), y0 = clampY(fy0), y1 = clampY(fy0 + 1);
+  const vec3 top = image.rgb(x0, y0) * (1.0f - fx) + image.rgb(x1, y0) * fx;
+  const vec3 bottom = image.rgb(x0, y1) * (1.0f - fx) + image.rgb(x1, y1) * fx;
+  return top * (1.0f - fy) + bottom * fy;
+}
+
+}  // namespace
+
+void ReferenceErrorSums::add(const ReferenceErrorSums& o) {
+  texels += o.texels;
+  sumSquaredError += o.sumSquaredError;
+  sumSquaredReference += o.sumSquaredReference;
+  sumKiln += o.sumKiln;
+  sumReference += o.sumReference;
+}
+
+double ReferenceErrorSums::relativeRmse() const {
+  return sumSquaredReference > 0.0 ? std::sqrt(sumSquaredError / sumSquaredReference) : 0.0;
+}
+
+double ReferenceErrorSums::meanRatio() const {
+  return sumReference > 0.0 ? sumKiln / sumReference : 0.0;
+}
+
+Result<ReferenceComparison> compareWithReference(const std::string& referenceDir,
+                                                 const std::string& bakeDir, bool keepImages) {
+  const fs::path refDir(referenceDir), outDir(bakeDir);
+  const std::string indexPath = (refDir / "index.json").string();
+  Result<Json> index = readJson(indexPath);
+  if (!index) return Error{index.error()};
+  const std::string manifestPath = (outDir / "manifest.json").string();
+  Result<Json> manifest = readJson(manifestPath);
+  if (!manifest) return Error{manifest.error()};
+  if (!index->contains("objects") || !(*index)["objects"].is_array())
+    return Error{indexPath + ": needs an \"objects\" array"};
+  if (!manifest->contains("objects") || !(*manifest)["objects"].is_array() ||
+      !manifest->contains("lightmaps") || !(*manifest)["lightmaps"].is_array())
+    return Error{manifestPath + ": needs \"objects\" and \"lightmaps\" arrays"};
+
+  std::map<int, const Json*> bakedObjects;
+  for (const Json& o : (*manifest)["objects"])
+    if (o.contains("nodeIndex") && o["nodeIndex"].is_number_integer())
+      bakedObjects[o["nodeIndex"].get<int>()] = &o;
+  std::map<int, Image> pages;  // loaded on first use
+
+  ReferenceComparison comparison;
+  for (const Json& ref : (*index)["objects"]) {
+    ObjectReferenceError result;
+    try {
+      result.node = ref.at("node").get<std::string>();
+      result.nodeIndex = ref.at("nodeIndex").get<int>();
+    } catch (const Json::exception&) {
+      return Error{indexPath + ": objects need \"node\" and \"nodeIndex\""};
+    }
+    const std::string who = "node " + std::to_string(result.nodeIndex) + " '" + result.node + "'";
+    auto it = bakedObjects.find(result.nodeIndex);
+    if (it == bakedObjects.end()) return Error{manifestPath + ": no object for " + who};
+    const Json& baked = *it->second;
+    if (baked.value("node", std::string()) != result.node)
+      return Error{manifestPath + ": " + who + " is called '" + baked.value("node", std::string()) +
+                   "' in the manifest"};
+    const int page = baked.value("lightmapIndex", -1);
+    if (page < 0 || size_t(page) >= (*manifest)["lightmaps"].size())
+      return Error{manifestPath + ": " + who + " has no lightmap"};
+    const Json& so = baked["scaleOffset"];
+    if (!so.is_array() || so.size() != 4) return Error{manifestPath + ": " + who + ": bad scaleOffset"};
+    const vec2 scale(so[0].get<float>(), so[1].get<float>()), offset(so[2].get<float>(), so[3].get<float>());
+    if (!pages.count(page)) {
+      const Json& lm = (*manifest)["lightmaps"][size_t(page)];
+      std::string file;
+      if (lm.contains("files") && lm["files"].contains("light"))
+        file = lm["files"]["light"].get<std::string>();
+      if (file.empty()) return Error{manifestPath + ": lightmaps[" + std::to_string(page) + "] has no light file"};
+      Result<Image> img = readHdrImage((outDir / file).string());
+      if (!img) return Error{img.error()};
+      pages[page] = std::move(img).value();
+    }
+    const Image& atlas = pages[page];
+
+    Result<Image> refImage = readHdrImage((refDir / ref.value("file", result.node + ".exr")).string());
+    if (!refImage) return Error{refImage.error()};
+    Result<Image> mask = readHdrImage((refDir / ref.value("mask", result.node + "_mask.exr")).string());
+    if (!mask) return Error{mask.error()};
+    if (mask->width != refImage->width || mask->height != refImage->height)
+      return Error{referenceDir + ": " + who + ": the mask and the image differ in size"};
+    const int w = refImage->width, h = refImage->height;
+    if (keepImages) {
+      result.kiln = Image(w, h, 3);
+      result.reference = *refImage;
+    }
+    auto covered = [&](int x, int y) {
+      return x >= 0 && y >= 0 && x < w && y < h && mask->rgb(x, y).r > 0.5f;
+    };
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        bool inside = true;
+        for (int dy = -1; dy <= 1 && inside; ++dy)
+          for (int dx = -1; dx <= 1 && inside; ++dx) inside = covered(x + dx, y + dy);
+        if (!inside) continue;
+        const vec2 uv((float(x) + 0.5f) / float(w), (float(y) + 0.5f) / float(h));
+        const vec2 a = uv * scale + offset;
+        const vec3 k = sampleBilinear(atlas, a.x, a.y), r = refImage->rgb(x, y);
+        bool hiddenNeighbour = false;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const vec3 q = refImage->rgb(x + dx, y + dy);
+            hiddenNeighbour |= q.r + q.g + q.b < kHiddenReference;
+          }
+        if (keepImages)
+          for (int c = 0; c < 3; ++c) result.kiln.at(x, y)[c] = k[c];
+        ReferenceErrorSums texel;
+        texel.texels = 1;
+        for (int c = 0; c < 3; ++c) {
+          texel.sumSquaredError += double(k[c] - r[c]) * double(k[c] - r[c]);
+          texel.sumSquaredReference += double(r[c]) * double(r[c]);
+          texel.sumKiln += k[c];
+          texel.sumReference += r[c];
+        }
+        result.sums.add(texel);
+        if (!hiddenNeighbour) result.visible.add(texel);
+      }
+    comparison.overall.add(result.sums);
+    comparison.overallVisible.add(result.visible);
+    comparison.objects.push_back(std::move(result));
+  }
+  return comparison;
+}
+
+std::string formatReferenceTable(const ReferenceComparison& c) {
+  std::ostringstream out;
+  char line[160];
+  std::snprintf(line, sizeof line, "%-14s | %-29s | %-29s\n", "", "all covered texels",
+                "visible texels (no hidden nbr)");
+  out << line;
+  std::snprintf(line, sizeof line, "%-14s | %7s %10s %10s | %7s %10s %10s\n", "object", "texels",
+                "rel.RMSE", "ratio", "texels", "rel.RMSE", "ratio");
+  out << line;
+  auto row = [&](const std::string& name, const ReferenceErrorSums& s, const ReferenceErrorSums& v) {
+    std::snprintf(line, sizeof line, "%-14s | %7zu %9.2f%% %10.4f | %7zu %9.2f%% %10.4f\n",
+                  name.c_str(), s.texels, 100.0 * s.relativeRmse(), s.meanRatio(), v.texels,
+                  100.0 * v.relativeRmse(), v.meanRatio());
+    out << line;
+  };
+  for (const ObjectReferenceError& o : c.objects) row(o.node, o.sums, o.visible);
+  row("overall", c.overall, c.overallVisible);
+  return out.str();
+}
+
+}  // namespace kiln

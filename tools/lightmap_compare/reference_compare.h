@@ -1,0 +1,69 @@
+// reference_compare.h: kiln's lightmaps against an independent renderer's per-object bakes
+// (../shared/reference/cornell_box: Blender Cycles, one EXR per object over its whole UV1
+// square, with a coverage mask; see that folder's README.md).
+//
+// For every reference texel (x, y) whose 3 x 3 neighbourhood is inside the mask (texels next
+// to UV edges hold Cycles' margin fill and are unreliable), its UV1 is ((x + 0.5) / W,
+// (y + 0.5) / H) (glTF orientation, row 0 = v 0); the object's scaleOffset from kiln's
+// manifest maps it into its atlas page, which is sampled bilinearly (texel centres at
+// (i + 0.5) / size). Accumulated per object and overall, over R, G and B:
+//   relative RMSE = sqrt(sum (k - r)^2 / sum r^2),   mean ratio = sum k / sum r.
+// A second set of sums, "visible", also leaves out texels with a hidden neighbour: a texel whose
+// 3 x 3 neighbourhood holds a reference texel with R + G + B < kHiddenReference, i.e. a surface
+// point no light reaches: inside a closed solid (the floor under the Cornell box's blocks, the
+// ceiling behind the light). Cycles bakes those black; kiln marks them invalid and fills them
+// from valid neighbours (MISSION.md "Texels"), as no camera can see them. Lit texels in the
+// scene are 2 to 3 orders of magnitude above the threshold (the visible results are the same
+// with 1e-2).
+// Used by the kiln_compare_reference tool and by tests/lightmap_reference_test.cpp.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "src/image.h"
+#include "src/result.h"
+
+namespace kiln {
+
+struct ReferenceErrorSums {
+  size_t texels = 0;
+  double sumSquaredError = 0.0;      // sum over texels and RGB of (k - r)^2
+  double sumSquaredReference = 0.0;  // sum of r^2
+  double sumKiln = 0.0, sumReference = 0.0;
+
+  void add(const ReferenceErrorSums& o);
+  double relativeRmse() const;  // sqrt(sumSquaredError / sumSquaredReference)
+  double meanRatio() const;     // sumKiln / sumReference
+};
+
+inline constexpr float kHiddenReference = 1e-3f;
+
+struct ObjectReferenceError {
+  std::string node;
+  int nodeIndex = -1;
+  ReferenceErrorSums sums;     // every compared texel
+  ReferenceErrorSums visible;  // without texels next to hidden ones
+  // With keepImages: kiln's lightmap resampled onto the reference's texels (0 where the
+  // texel is not compared), and the reference itself.
+  Image kiln, reference;
+};
+
+struct ReferenceComparison {
+  std::vector<ObjectReferenceError> objects;  // in the reference's index.json order
+  ReferenceErrorSums overall;
+  ReferenceErrorSums overallVisible;
+};
+
+// Compares the bake in `bakeDir` (manifest.json and its light EXRs) with the reference in
+// `referenceDir` (index.json, <node>.exr, <node>_mask.exr). Objects are matched by
+// nodeIndex (their names must agree). Errors name the file and the object.
+Result<ReferenceComparison> compareWithReference(const std::string& referenceDir,
+                                                 const std::string& bakeDir,
+                                                 bool keepImages = false);
+
+// A plain-text table: object, then texels, relative RMSE (%) and mean ratio over all compared
+// texels and over the visible ones; then the overall row.
+std::string formatReferenceTable(const ReferenceComparison& comparison);
+
+}  // namespace kiln
