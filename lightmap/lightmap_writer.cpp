@@ -4,11 +4,15 @@
 // manifest last, so that a failure leaves the previous outputs as they were.
 #include "lightmap/lightmap_writer.h"
 
+#include <charconv>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <system_error>
 
 #include "lightmap/gltf_writer.h"
 #include "lightmap/ldr_encoding.h"
@@ -82,6 +86,28 @@ const char* ldrName(LdrEncoding e) {
   return "none";
 }
 
+// A float setting as the shortest decimal that reads back as the same float: 0.1f is written
+// "0.1", not "0.10000000149011612".
+double shortestDecimal(float v) {
+  char buf[32];
+  const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  if (ec != std::errc()) return double(v);
+  return std::strtod(std::string(buf, end).c_str(), nullptr);
+}
+
+// The light's extras.kiln.mode as the glTF file spells it.
+const char* lightModeName(LightMode mode) {
+  switch (mode) {
+    case LightMode::Mixed:
+      return "mixed";
+    case LightMode::Realtime:
+      return "realtime";
+    case LightMode::Baked:
+      break;
+  }
+  return "baked";
+}
+
 }  // namespace
 
 std::string lightmapFileName(int page, const char* kind) {
@@ -92,7 +118,7 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   // Everything that changes the output; `threads` does not (deterministic) and is left out.
   Json j;
   j["preset"] = o.preset.empty() ? Json(nullptr) : Json(o.preset);
-  j["resolution"] = s.resolution;
+  j["resolution"] = shortestDecimal(s.resolution);
   j["padding"] = s.padding;
   j["maxSize"] = s.maxSize;
   j["lockAtlas"] = o.lockAtlas.empty() ? Json(nullptr) : Json(o.lockAtlas);
@@ -100,15 +126,16 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["supersampling"] = s.supersampling;
   j["seed"] = s.seed;
   j["bounces"] = s.bounces;
-  j["albedoBoost"] = s.albedoBoost;
-  j["indirectIntensity"] = s.indirectIntensity;
-  j["backfaceTolerance"] = s.backfaceTolerance;
+  j["albedoBoost"] = shortestDecimal(s.albedoBoost);
+  j["indirectIntensity"] = shortestDecimal(s.indirectIntensity);
+  j["backfaceTolerance"] = shortestDecimal(s.backfaceTolerance);
   j["ambientOcclusion"] = s.ambientOcclusion;
-  j["aoMaxDistance"] = s.aoMaxDistance;
-  j["aoAmount"] = s.aoAmount;
+  j["aoMaxDistance"] = shortestDecimal(s.aoMaxDistance);
+  j["aoAmount"] = shortestDecimal(s.aoAmount);
   j["lightingMode"] = lightingModeName(s.lightingMode);
   j["directional"] = s.directional;
-  j["shadowColor"] = {s.shadowColor.r, s.shadowColor.g, s.shadowColor.b};
+  j["shadowColor"] = {shortestDecimal(s.shadowColor.r), shortestDecimal(s.shadowColor.g),
+                      shortestDecimal(s.shadowColor.b)};
   j["denoise"] = s.denoise;
   j["stitchSeams"] = s.stitchSeams;
   j["ldr"] = ldrName(o.ldr);
@@ -185,12 +212,16 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
   manifest["lightmaps"] = lightmaps;
   manifest["objects"] = atlas["objects"];
   manifest["settings"] = lightmapSettingsJson(settings, output);
-  // What each light contributed under the lighting mode, and its shadowmask channel.
+  // Every scene light (docs/mixed_lighting.md): its name and mode as the glTF gives them, what
+  // the lighting mode baked of it, and its shadowmask channel (-1: none).
   Json lights = Json::array();
   const LightModePlan& plan = result.lightModes;
   for (size_t l = 0; l < result.scene.lights.size(); ++l) {
     const Light& light = result.scene.lights[l];
-    Json e = {{"light", light.name}, {"lightIndex", light.lightIndex}};
+    Json e = {{"name", light.name},
+              {"lightIndex", light.lightIndex},
+              {"nodeIndex", light.nodeIndex},
+              {"mode", lightModeName(light.mode)}};
     if (l < plan.bakeDirect.size()) e["bakedDirect"] = bool(plan.bakeDirect[l]);
     if (l < plan.bakeIndirect.size()) e["bakedIndirect"] = bool(plan.bakeIndirect[l]);
     if (l < plan.shadowmaskChannel.size()) e["shadowmaskChannel"] = plan.shadowmaskChannel[l];

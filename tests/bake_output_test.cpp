@@ -7,15 +7,19 @@
 
 #include <cmath>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <tuple>
+#include <vector>
 
 #include "lightmap/atlas.h"
 #include "lightmap/lightmap_writer.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/gltf_loader.h"
 #include "src/image.h"
+#include "src/light_modes.h"
 #include "tests/test_util.h"
 
 namespace kiln {
@@ -473,6 +477,285 @@ TEST(BakeCommand, GeneratedUvSceneAndSummary) {
     }
   }
   EXPECT_TRUE(fs::exists(dir + "/lightmap-0_light_dldr.png"));
+}
+
+// ---- mixed lighting through the CLI (docs/mixed_lighting.md) -------------------------------
+
+// A 4 m x 4 m floor (x in [0, 4], z in [-4, 0], y = 0, facing +y, TEXCOORD_1 = (x / 4, -z / 4))
+// under a double-sided blocker at y = 0.5 covering x < 1 (not lightmapped, casts shadows), and
+// seven lights: a mixed sun straight down, four mixed point lights without range (all five
+// overlap: one gets no shadowmask channel), a realtime and a baked point light. Returns the
+// .gltf path. `lightingMode`: the scene's extras.kiln.lightingMode, none when empty.
+std::string writeMixedScene(const std::string& dir, const std::string& lightingMode) {
+  const float floorPos[] = {0, 0, 0, 4, 0, 0, 4, 0, -4, 0, 0, -4};
+  const float blockPos[] = {-1, 0.5f, 1, 1, 0.5f, 1, 1, 0.5f, -5, -1, 0.5f, -5};
+  const float normals[] = {0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0};
+  const float uv1[] = {0, 0, 1, 0, 1, 1, 0, 1};
+  const uint16_t indices[] = {0, 1, 2, 0, 2, 3};
+  std::string bin;
+  for (auto [data, size] : {std::pair<const void*, size_t>{floorPos, 48},
+                            {blockPos, 48},
+                            {normals, 48},
+                            {uv1, 32},
+                            {indices, 12}})
+    bin.append(static_cast<const char*>(data), size);
+  test::writeTextFile(dir + "/mixed.bin", bin);
+  Json views = Json::array(), accessors = Json::array();
+  size_t offset = 0;
+  for (auto [size, comp, count, type] : {std::tuple{48, 5126, 4, "VEC3"},
+                                         {48, 5126, 4, "VEC3"},
+                                         {48, 5126, 4, "VEC3"},
+                                         {32, 5126, 4, "VEC2"},
+                                         {12, 5123, 6, "SCALAR"}}) {
+    views.push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", size}});
+    accessors.push_back({{"bufferView", views.size() - 1},
+                         {"componentType", comp},
+                         {"count", count},
+                         {"type", type}});
+    offset += size_t(size);
+  }
+  accessors[0]["min"] = {0, 0, -4};
+  accessors[0]["max"] = {4, 0, 0};
+  accessors[1]["min"] = {-1, 0.5, -5};
+  accessors[1]["max"] = {1, 0.5, 1};
+  auto light = [](const char* name, const char* type, double intensity, const char* mode) {
+    return Json{{"name", name},
+                {"type", type},
+                {"intensity", intensity},
+                {"extras", {{"kiln", {{"mode", mode}}}}}};
+  };
+  auto at = [](int lightIndex, Json translation) {
+    return Json{{"name", "L" + std::to_string(lightIndex)},
+                {"translation", translation},
+                {"extensions", {{"KHR_lights_punctual", {{"light", lightIndex}}}}}};
+  };
+  Json sunNode = at(0, {0, 10, 0});
+  sunNode["rotation"] = {-0.70710678, 0, 0, 0.70710678};  // -Z (its light) turned to -Y
+  Json sceneExtras = Json::object();
+  if (!lightingMode.empty()) sceneExtras = {{"kiln", {{"lightingMode", lightingMode}}}};
+  const Json doc = {
+      {"asset", {{"version", "2.0"}}},
+      {"scene", 0},
+      {"buffers", {{{"uri", "mixed.bin"}, {"byteLength", bin.size()}}}},
+      {"bufferViews", views},
+      {"accessors", accessors},
+      {"materials", {{{"name", "grey"}}, {{"name", "blocker"}, {"doubleSided", true}}}},
+      {"meshes",
+       {{{"primitives",
+          {{{"attributes", {{"POSITION", 0}, {"NORMAL", 2}, {"TEXCOORD_1", 3}}},
+            {"indices", 4},
+            {"material", 0}}}}},
+        {{"primitives",
+          {{{"attributes", {{"POSITION", 1}, {"NORMAL", 2}}}, {"indices", 4}, {"material", 1}}}}}}},
+      {"extensionsUsed", {"KHR_lights_punctual"}},
+      {"extensions",
+       {{"KHR_lights_punctual",
+         {{"lights",
+           {light("sun", "directional", 3.0, "mixed"), light("lampA", "point", 20.0, "mixed"),
+            light("lampB", "point", 10.0, "mixed"), light("lampC", "point", 5.0, "mixed"),
+            light("lampD", "point", 2.0, "mixed"), light("fill", "point", 50.0, "realtime"),
+            light("bulb", "point", 4.0, "baked")}}}}}},
+      {"nodes",
+       {{{"name", "floor"}, {"mesh", 0}},
+        {{"name", "blocker"}, {"mesh", 1}, {"extras", {{"kiln", {{"scaleInLightmap", 0}}}}}},
+        sunNode,
+        at(1, {0.5, 2, -2}),
+        at(2, {3.5, 2, -0.5}),
+        at(3, {3.5, 2, -3.5}),
+        at(4, {2, 2, -2}),
+        at(5, {2, 3, -2}),
+        at(6, {3, 1, -1})}},
+      {"scenes", {{{"nodes", {0, 1, 2, 3, 4, 5, 6, 7, 8}}, {"extras", sceneExtras}}}}};
+  const std::string path = dir + "/mixed.gltf";
+  test::writeTextFile(path, doc.dump(1));
+  return path;
+}
+
+// kiln bake in Shadowmask mode with --directional and --shadow-color: the manifest records the
+// mode, the colour and every light with the plan's channel; the shadowmask is 1 in full light
+// and 0 in hard shadow; the light and direction pages hold the baked lights' direct light and
+// its direction (--bounces 0: nothing else reaches the floor).
+TEST(BakeCommand, ShadowmaskDirectionalEndToEnd) {
+  const std::string dir = test::makeTempDir("bake_mixed");
+  // The scene asks for baked-indirect; the command line wins.
+  const std::string scene = writeMixedScene(dir, "baked-indirect");
+  std::string out;
+  ASSERT_EQ(kiln("bake " + scene + " --out " + dir +
+                     "/out --lighting-mode shadowmask "
+                     "--directional --shadow-color 0.1,0.25,0.5 --resolution 8 --samples 4 "
+                     "--bounces 0 -q",
+                 &out),
+            0)
+      << out;
+  // The fifth overlapping mixed light is baked fully, with a warning naming it.
+  EXPECT_NE(out.find("kiln: warning: light 'lampD'"), std::string::npos) << out;
+
+  const Json m = readJson(dir + "/out/manifest.json");
+  EXPECT_EQ(m["settings"]["lightingMode"], "shadowmask");
+  EXPECT_EQ(m["settings"]["directional"], true);
+  ASSERT_EQ(m["settings"]["shadowColor"].size(), 3u);
+  EXPECT_EQ(m["settings"]["shadowColor"][0].get<float>(), 0.1f);
+  EXPECT_EQ(m["settings"]["shadowColor"][1].get<float>(), 0.25f);
+  EXPECT_EQ(m["settings"]["shadowColor"][2].get<float>(), 0.5f);
+  EXPECT_EQ(m["settings"]["shadowColor"][0].get<double>(), 0.1);  // written as "0.1"
+
+  // Every light, with the plan's mode and channel: the sun first, then by intensity; lampD
+  // (the weakest of five overlapping) none; realtime and baked lights none.
+  Result<Scene> loaded = loadScene(scene);
+  ASSERT_TRUE(loaded.ok()) << loaded.error();
+  const LightModePlan plan = planLightModes(*loaded, LightingMode::Shadowmask);
+  const std::vector<std::string> names = {"sun",   "lampA", "lampB", "lampC",
+                                          "lampD", "fill",  "bulb"};
+  const std::vector<std::string> modes = {"mixed", "mixed",    "mixed", "mixed",
+                                          "mixed", "realtime", "baked"};
+  const std::vector<int> channels = {0, 1, 2, 3, -1, -1, -1};
+  EXPECT_EQ(plan.shadowmaskChannel, channels);
+  ASSERT_EQ(m["lights"].size(), names.size()) << m["lights"].dump();
+  for (size_t l = 0; l < names.size(); ++l) {
+    const Json& e = m["lights"][l];
+    EXPECT_EQ(e["name"], names[l]);
+    EXPECT_EQ(e["lightIndex"], loaded->lights[l].lightIndex);
+    EXPECT_EQ(e["nodeIndex"], loaded->lights[l].nodeIndex);
+    EXPECT_EQ(e["mode"], modes[l]) << names[l];
+    EXPECT_EQ(e["shadowmaskChannel"], channels[l]) << names[l];
+    EXPECT_EQ(e["bakedDirect"], bool(plan.bakeDirect[l])) << names[l];
+    EXPECT_EQ(e["bakedIndirect"], bool(plan.bakeIndirect[l])) << names[l];
+  }
+  EXPECT_EQ(m["lights"][4]["bakedDirect"], true);  // lampD fell back to baked
+  EXPECT_EQ(m["lights"][5]["bakedIndirect"], false);
+
+  // The files, 4 channels each, the page's size.
+  ASSERT_EQ(m["lightmaps"].size(), 1u);
+  const Json& files = m["lightmaps"][0]["files"];
+  ASSERT_EQ(files["shadowmask"], "lightmap-0_shadowmask.exr");
+  ASSERT_EQ(files["direction"], "lightmap-0_direction.exr");
+  Result<Image> mask = readHdrImage(dir + "/out/lightmap-0_shadowmask.exr");
+  Result<Image> direction = readHdrImage(dir + "/out/lightmap-0_direction.exr");
+  Result<Image> light = readHdrImage(dir + "/out/lightmap-0_light.exr");
+  ASSERT_TRUE(mask.ok() && direction.ok() && light.ok());
+  EXPECT_EQ(mask->channels, 4);
+  EXPECT_EQ(direction->channels, 4);
+  for (const Image* img : {&*mask, &*direction, &*light}) {
+    EXPECT_EQ(img->width, m["lightmaps"][0]["width"]);
+    EXPECT_EQ(img->height, m["lightmaps"][0]["height"]);
+  }
+
+  // Texels found through the manifest's scaleOffset; (x, z) -> uv1 = (x / 4, -z / 4). The
+  // expected values are taken at the texel's centre, mapped back to the floor.
+  const Json& floor = m["objects"][0];
+  ASSERT_EQ(floor["node"], "floor");
+  ASSERT_EQ(floor["lightmapIndex"], 0);
+  const vec4 so(floor["scaleOffset"][0].get<float>(), floor["scaleOffset"][1].get<float>(),
+                floor["scaleOffset"][2].get<float>(), floor["scaleOffset"][3].get<float>());
+  const int w = mask->width, h = mask->height;
+  struct Texel {
+    int x, y;
+    vec3 centre;  // world
+  };
+  auto texelAt = [&](float x, float z) {
+    const vec2 atlas = vec2(x / 4.0f, -z / 4.0f) * vec2(so.x, so.y) + vec2(so.z, so.w);
+    Texel t{int(std::floor(atlas.x * float(w))), int(std::floor(atlas.y * float(h))), vec3(0.0f)};
+    const vec2 uv =
+        ((vec2(float(t.x), float(t.y)) + 0.5f) / vec2(float(w), float(h)) - vec2(so.z, so.w)) /
+        vec2(so.x, so.y);
+    t.centre = vec3(4.0f * uv.x, 0.0f, -4.0f * uv.y);
+    return t;
+  };
+  const vec3 lampD(2, 2, -2), bulb(3, 1, -1);
+  // Irradiance on the floor (normal +y) from a point light of I candela at q, unshadowed.
+  auto pointE = [](vec3 q, float candela, vec3 p) {
+    const vec3 d = q - p;
+    return candela * d.y / std::pow(glm::length(d), 3.0f);
+  };
+
+  // Under the blocker, straight below lampA: the sun (channel 0) and lampA (1) are blocked,
+  // lampB and lampC (2, 3) pass beside the blocker's edge. Only the bulb's direct light is
+  // baked here (lampD is blocked too), so the direction is the bulb's, directionality 1.
+  const Texel shadow = texelAt(0.45f, -2.1f);
+  const float* ms = mask->at(shadow.x, shadow.y);
+  EXPECT_NEAR(ms[0], 0.0f, 1e-3f);
+  EXPECT_NEAR(ms[1], 0.0f, 1e-3f);
+  EXPECT_NEAR(ms[2], 1.0f, 1e-3f);
+  EXPECT_NEAR(ms[3], 1.0f, 1e-3f);
+  const float eShadow = pointE(bulb, 4.0f, shadow.centre);
+  EXPECT_NEAR(light->rgb(shadow.x, shadow.y).g, eShadow * kInvPi, 0.01f * eShadow * kInvPi);
+  const vec4 ds(direction->at(shadow.x, shadow.y)[0], direction->at(shadow.x, shadow.y)[1],
+                direction->at(shadow.x, shadow.y)[2], direction->at(shadow.x, shadow.y)[3]);
+  const vec3 toBulb = glm::normalize(bulb - shadow.centre);
+  EXPECT_LT(glm::length(2.0f * vec3(ds) - 1.0f - toBulb), 0.01f);
+  EXPECT_NEAR(ds.w, toBulb.y * 0.5f + 0.5f, 0.005f);
+
+  // In full light: every channel 1; the light holds lampD's and the bulb's direct light and
+  // the direction their irradiance-weighted mean.
+  const Texel lit = texelAt(3.05f, -2.1f);
+  for (int c = 0; c < 4; ++c) EXPECT_NEAR(mask->at(lit.x, lit.y)[c], 1.0f, 1e-3f) << c;
+  const float eD = pointE(lampD, 2.0f, lit.centre), eB = pointE(bulb, 4.0f, lit.centre);
+  EXPECT_NEAR(light->rgb(lit.x, lit.y).g, (eD + eB) * kInvPi, 0.01f * (eD + eB) * kInvPi);
+  const vec3 dominant =
+      (eD * glm::normalize(lampD - lit.centre) + eB * glm::normalize(bulb - lit.centre)) /
+      (eD + eB);
+  const float* dl = direction->at(lit.x, lit.y);
+  EXPECT_LT(glm::length(2.0f * vec3(dl[0], dl[1], dl[2]) - 1.0f - dominant), 0.01f);
+  EXPECT_LT(glm::length(dominant), 0.99f);  // two directions: directionality below 1
+  std::printf(
+      "shadow texel (%d, %d): mask %.3f %.3f %.3f %.3f; lit texel (%d, %d): light %.4f "
+      "(expected %.4f), directionality %.3f\n",
+      shadow.x, shadow.y, ms[0], ms[1], ms[2], ms[3], lit.x, lit.y, light->rgb(lit.x, lit.y).g,
+      (eD + eB) * kInvPi, glm::length(dominant));
+  fs::remove_all(dir);
+}
+
+// The scene's extras.kiln.lightingMode applies when the command line gives none: Subtractive
+// bakes every non-realtime light fully, writes no shadowmask and records the default shadow
+// colour.
+TEST(BakeCommand, SceneLightingModeAndDefaultShadowColor) {
+  const std::string dir = test::makeTempDir("bake_mixed");
+  const std::string scene = writeMixedScene(dir, "subtractive");
+  std::string out;
+  ASSERT_EQ(kiln("bake " + scene + " --out " + dir +
+                     "/out --resolution 4 --samples 4 "
+                     "--bounces 0 -q",
+                 &out),
+            0)
+      << out;
+  EXPECT_EQ(out.find("warning"), std::string::npos) << out;
+  const Json m = readJson(dir + "/out/manifest.json");
+  EXPECT_EQ(m["settings"]["lightingMode"], "subtractive");
+  const LightmapBakeSettings defaults;
+  for (int c = 0; c < 3; ++c)
+    EXPECT_EQ(m["settings"]["shadowColor"][size_t(c)].get<float>(), defaults.shadowColor[c]);
+  EXPECT_FALSE(m["lightmaps"][0]["files"].contains("shadowmask"));
+  EXPECT_FALSE(m["lightmaps"][0]["files"].contains("direction"));
+  ASSERT_EQ(m["lights"].size(), 7u);
+  for (size_t l = 0; l < 7; ++l) {
+    const bool realtime = m["lights"][l]["mode"] == "realtime";
+    EXPECT_EQ(m["lights"][l]["shadowmaskChannel"], -1);
+    EXPECT_EQ(m["lights"][l]["bakedDirect"], !realtime);
+  }
+  fs::remove_all(dir);
+}
+
+TEST(BakeCommand, BadShadowColorIsBadUsage) {
+  const std::string dir = test::makeTempDir("bake_mixed");
+  const std::string scene = writeMixedScene(dir, "");
+  for (const char* bad : {"1,2", "1,2,3,4", "-0.1,0,0", "nan,0,0", "0,inf,0", "a,b,c", "1,,2",
+                          "0.5", "", "1,2,3x", "1e39,0,0"}) {
+    std::string out;
+    EXPECT_EQ(kiln("bake " + scene + " --out " + dir + "/out --shadow-color '" + bad + "'", &out),
+              2)
+        << bad << ": " << out;
+    EXPECT_NE(out.find("--shadow-color"), std::string::npos) << bad << ": " << out;
+  }
+  EXPECT_FALSE(fs::exists(dir + "/out"));
+  // Spaces around the numbers are fine.
+  std::string out;
+  EXPECT_EQ(kiln("bake " + scene + " --out " + dir +
+                     "/ok --shadow-color ' 0.2, 0.3 ,0.4' "
+                     "--resolution 2 --samples 1 --bounces 0 -q",
+                 &out),
+            0)
+      << out;
+  fs::remove_all(dir);
 }
 
 }  // namespace

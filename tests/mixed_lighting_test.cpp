@@ -7,7 +7,7 @@
 //      fifth is baked and warned about; two far-apart mixed lights share a channel;
 //   4. shadowmask values: 1 in light, 0 in hard shadow, the visible fraction of a soft light's
 //      cone in its penumbra (computed directly by quadrature);
-//   5. the subtractive decode on a known configuration.
+//   5. the subtractive decode on a known configuration (baked, and in closed form).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -446,6 +446,33 @@ TEST(MixedLighting, Check5SubtractiveFormula) {
   EXPECT_GT(lit, 50u);
   EXPECT_GT(shadowed, 50u);
   EXPECT_LT(worst, 1e-5);
+}
+
+// 5b. The subtractive decode in closed form, every branch: the estimate subtracted, the clamp
+// to the shadow colour, the shadow strength blend and the min with the lightmap.
+TEST(MixedLighting, Check5SubtractiveHandComputed) {
+  const vec3 lm(1.0f, 0.8f, 0.6f), shadowColor(0.3f);
+  const vec3 n(0, 1, 0), toLight(0.6f, 0.8f, 0.0f);  // dot(n, l) = 0.8
+  const vec3 lightColor(0.5f);                       // estimate = 0.8 x 0.5 = 0.4 in shadow
+  auto near = [](vec3 a, vec3 b) { return glm::length(a - b) < 1e-6f; };
+  // Full shadow: (1, 0.8, 0.6) - 0.4 = (0.6, 0.4, 0.2), clamped to 0.3 in blue.
+  EXPECT_PRED2(near, subtractiveLightmap(lm, n, toLight, 0.0f, lightColor, shadowColor),
+               vec3(0.6f, 0.4f, 0.3f));
+  // Half attenuation: estimate 0.2.
+  EXPECT_PRED2(near, subtractiveLightmap(lm, n, toLight, 0.5f, lightColor, shadowColor),
+               vec3(0.8f, 0.6f, 0.4f));
+  // Shadow strength 0.5 (shadowStrength' = 0.5): halfway back to the lightmap.
+  EXPECT_PRED2(near, subtractiveLightmap(lm, n, toLight, 0.0f, lightColor, shadowColor, 0.5f),
+               vec3(0.8f, 0.6f, 0.45f));
+  // A shadow colour above the lightmap never brightens it.
+  EXPECT_PRED2(near, subtractiveLightmap(lm, n, toLight, 0.0f, lightColor, vec3(0.9f)),
+               vec3(0.9f, 0.8f, 0.6f));
+  // A surface facing away from the light: nothing to subtract.
+  EXPECT_PRED2(near, subtractiveLightmap(lm, -n, toLight, 0.0f, lightColor, shadowColor), lm);
+  // Shadowmask: the light's channel, 1 without one.
+  const vec4 mask(0.25f, 0.5f, 0.75f, 1.0f);
+  EXPECT_EQ(shadowmaskVisibility(mask, 2), 0.75f);
+  EXPECT_EQ(shadowmaskVisibility(mask, -1), 1.0f);
 }
 
 // The shadowmask and direction maps are keyed like the light: bit-identical at any thread

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -49,6 +50,7 @@ struct BakeOptions {
   std::string ldr;
   std::string lockAtlas;
   std::string lightingMode;
+  std::optional<std::string> shadowColor;  // "R,G,B", parsed by parseShadowColor
   bool directional = false;
   bool quiet = false;
 };
@@ -64,6 +66,30 @@ std::string humanCount(double n) {
   else
     std::snprintf(buf, sizeof buf, "%.0f", n);
   return buf;
+}
+
+// --shadow-color "R,G,B": three finite numbers >= 0 (lightmap units, E / pi), separated by
+// commas; spaces around them are allowed. Returns nothing for anything else.
+std::optional<vec3> parseShadowColor(const std::string& text) {
+  vec3 colour(0.0f);
+  size_t start = 0;
+  for (int c = 0; c < 3; ++c) {
+    const size_t comma = text.find(',', start);
+    if ((c < 2) != (comma != std::string::npos)) return std::nullopt;  // not exactly 3 parts
+    std::string part =
+        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    start = comma + 1;
+    const size_t first = part.find_first_not_of(" \t"), last = part.find_last_not_of(" \t");
+    if (first == std::string::npos) return std::nullopt;
+    part = part.substr(first, last - first + 1);
+    char* end = nullptr;
+    const double v = std::strtod(part.c_str(), &end);
+    if (end != part.c_str() + part.size() || !std::isfinite(v) || v < 0.0 ||
+        v > double(std::numeric_limits<float>::max()))
+      return std::nullopt;
+    colour[c] = float(v) + 0.0f;  // "-0" reads as +0
+  }
+  return colour;
 }
 
 // The scene's extras.kiln settings that the lightmap bake uses. Returns an exit code.
@@ -155,6 +181,16 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
 
 int runBake(const BakeOptions& o) {
   const auto start = std::chrono::steady_clock::now();
+  std::optional<vec3> shadowColor;
+  if (o.shadowColor) {
+    shadowColor = parseShadowColor(*o.shadowColor);
+    if (!shadowColor) {
+      printError("--shadow-color '" + *o.shadowColor +
+                 "': expected three finite numbers >= 0 separated by commas, R,G,B in "
+                 "lightmap units (e.g. 0.42,0.478,0.627)");
+      return kExitBadUsage;
+    }
+  }
   Scene scene;
   if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
 
@@ -170,6 +206,7 @@ int runBake(const BakeOptions& o) {
   }
   if (int code = applySceneSettings(scene, settings)) return code;
   if (!o.lightingMode.empty()) settings.lightingMode = *parseLightingMode(o.lightingMode);
+  if (shadowColor) settings.shadowColor = *shadowColor;
   if (o.directional) settings.directional = true;
   if (o.samples) settings.samplesPerTexel = *o.samples;
   if (o.resolution) settings.resolution = *o.resolution;
@@ -277,6 +314,9 @@ void registerBakeCommand(CLI::App& app) {
   b->add_option("--lighting-mode", o->lightingMode,
                 "Mixed lights: baked-indirect, shadowmask or subtractive (docs/mixed_lighting.md)")
       ->check(CLI::IsMember({"baked-indirect", "shadowmask", "subtractive"}));
+  b->add_option("--shadow-color", o->shadowColor,
+                "Subtractive: realtime shadow colour R,G,B in lightmap units, recorded in the "
+                "manifest (default 0.42,0.478,0.627)");
   b->add_flag("--directional", o->directional,
               "Also bake the dominant light direction (lightmap-<i>_direction.exr)");
   b->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
