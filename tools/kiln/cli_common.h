@@ -38,5 +38,7 @@ void registerInfoCommand(CLI::App& app);
 void registerBakeCommand(CLI::App& app);  // kiln bake (lightmaps)
 void registerProbesCommand(CLI::App& app);  // kiln probes bake | query | export
 void registerProbesPlaceCommand(CLI::App& probes);  // kiln probes place | compare-placement
+void registerRenderCommand(CLI::App& app);  // kiln render (preview renderer, --compare)
+void registerChartCommand(CLI::App& app);  // kiln chart (speed vs accuracy charts)
 
 }  // namespace kiln::cli

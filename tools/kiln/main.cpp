@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   registerInfoCommand(app);
   registerBakeCommand(app);
   registerProbesCommand(app);
+  registerRenderCommand(app);
+  registerChartCommand(app);
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,269 @@
+// chart_test.cpp: `kiln chart --quick` (tools/chart, docs/charts.md), one chart per test: each
+// CSV has its '#' notes and expected columns, and the numbers obey what physics and geometry
+// fix: lightmap error falls as 1/sqrt(samples) (log-log slope near -1/2), L2 irradiance is
+// closer to brute-force integration than L1 (orthogonality of the SH bands), deringed L2
+// irradiance is never negative, TetGen and CGAL build the same Delaunay tetrahedralization,
+// every lookup method finds the tetrahedron brute force finds. PNGs exist when gnuplot is
+// installed; without gnuplot the CSVs are written and the exit code names the package.
+// No timing is asserted (timings are only required to be positive).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "tests/test_util.h"
+
+namespace kiln {
+namespace {
+
+struct Csv {
+  std::vector<std::string> notes;
+  std::vector<std::string> columns;
+  std::vector<std::vector<std::string>> rows;
+
+  int col(const std::string& name) const {
+    for (size_t i = 0; i < columns.size(); ++i)
+      if (columns[i] == name) return int(i);
+    ADD_FAILURE() << "no column " << name;
+    return 0;
+  }
+  std::string at(size_t r, const std::string& name) const { return rows[r][size_t(col(name))]; }
+  double num(size_t r, const std::string& name) const { return std::stod(at(r, name)); }
+};
+
+std::vector<std::string> splitCsvLine(const std::string& line) {
+  std::vector<std::string> cells(1);
+  bool quoted = false;
+  for (size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted) {
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+        cells.back() += '"';
+        ++i;
+      } else if (c == '"') {
+        quoted = false;
+      } else {
+        cells.back() += c;
+      }
+    } else if (c == '"') {
+      quoted = true;
+    } else if (c == ',') {
+      cells.emplace_back();
+    } else {
+      cells.back() += c;
+    }
+  }
+  return cells;
+}
+
+Csv readCsv(const std::string& path) {
+  Csv csv;
+  std::ifstream in(path);
+  EXPECT_TRUE(in.good()) << path;
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("# ", 0) == 0) {
+      EXPECT_TRUE(csv.columns.empty()) << "notes come first: " << line;
+      csv.notes.push_back(line.substr(2));
+    } else if (csv.columns.empty()) {
+      csv.columns = splitCsvLine(line);
+    } else {
+      csv.rows.push_back(splitCsvLine(line));
+      EXPECT_EQ(csv.rows.back().size(), csv.columns.size()) << path << ": " << line;
+    }
+  }
+  return csv;
+}
+
+bool gnuplotInstalled() {
+  std::string out;
+  return test::runCommand("command -v gnuplot", &out) == 0;
+}
+
+// PNG signature and a plausible size.
+void expectPng(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  ASSERT_TRUE(in.good()) << path << " missing";
+  char sig[8] = {};
+  in.read(sig, 8);
+  EXPECT_EQ(std::string(sig, 8), std::string("\x89PNG\r\n\x1a\n", 8)) << path;
+  EXPECT_GT(std::filesystem::file_size(path), 2000u) << path;
+}
+
+// Runs `kiln chart --quick --only <chart>` into a fresh directory and returns its CSV.
+Csv runChart(const std::string& chart, const std::string& name) {
+  const std::string dir = test::makeTempDir("kiln_chart");
+  std::string out;
+  const int code = test::runCommand(std::string(test::kilnExe()) + " chart --quick -q --only " +
+                                        chart + " --out " + dir,
+                                    &out);
+  const std::string csvPath = dir + "/" + name + ".csv";
+  if (gnuplotInstalled()) {
+    EXPECT_EQ(code, 0) << out;
+    expectPng(dir + "/" + name + ".png");
+  } else {
+    EXPECT_EQ(code, 1) << out;
+    EXPECT_NE(out.find("gnuplot-nox"), std::string::npos) << out;
+  }
+  EXPECT_TRUE(std::filesystem::exists(csvPath)) << out;
+  Csv csv = readCsv(csvPath);
+  // Every CSV says how it was measured: command, machine, seed, then the chart's own notes.
+  EXPECT_GE(csv.notes.size(), 6u);
+  bool machine = false, seed = false, baseline = false;
+  for (const std::string& n : csv.notes) {
+    machine = machine || n.rfind("machine: ", 0) == 0;
+    seed = seed || n.rfind("seed: ", 0) == 0;
+    baseline = baseline || n.find("baseline") != std::string::npos;
+  }
+  EXPECT_TRUE(machine && seed && baseline) << csvPath;
+  return csv;
+}
+
+TEST(Chart, LightmapErrorFallsAsOneOverSqrtSamples) {
+  const Csv csv = runChart("lightmap", "lightmap_samples");
+  EXPECT_EQ(csv.columns,
+            (std::vector<std::string>{"variant", "samples", "relative_rms_error", "rms_error",
+                                      "bake_seconds", "light_seconds", "rays", "texels",
+                                      "repeats", "reference_samples"}));
+  std::vector<double> lx, ly;
+  double previous = kInfinity;
+  for (size_t r = 0; r < csv.rows.size(); ++r) {
+    EXPECT_GT(csv.num(r, "bake_seconds"), 0.0);
+    EXPECT_GT(csv.num(r, "texels"), 100.0);
+    if (csv.at(r, "variant") != "raw") continue;
+    const double n = csv.num(r, "samples"), e = csv.num(r, "relative_rms_error");
+    EXPECT_LT(e, previous) << "error must fall with samples";
+    previous = e;
+    lx.push_back(std::log(n));
+    ly.push_back(std::log(e));
+  }
+  ASSERT_GE(lx.size(), 3u);
+  // Least-squares slope of log error against log samples: Monte Carlo gives -1/2; the
+  // reference's own noise (1/16 of the largest count's variance) and stratification bend it
+  // by a few hundredths.
+  double mx = 0, my = 0;
+  for (size_t i = 0; i < lx.size(); ++i) mx += lx[i], my += ly[i];
+  mx /= double(lx.size());
+  my /= double(ly.size());
+  double sxy = 0, sxx = 0;
+  for (size_t i = 0; i < lx.size(); ++i) sxy += (lx[i] - mx) * (ly[i] - my), sxx += (lx[i] - mx) * (lx[i] - mx);
+  const double slope = sxy / sxx;
+  EXPECT_NEAR(slope, -0.5, 0.12);
+}
+
+TEST(Chart, ProbePlacementHasAllThreeMethods) {
+  const Csv csv = runChart("placement", "probe_placement");
+  EXPECT_EQ(csv.columns, (std::vector<std::string>{"method", "probes", "mean_error", "p95_error",
+                                                   "max_error", "place_seconds", "setting"}));
+  std::map<std::string, std::vector<double>> counts;
+  for (size_t r = 0; r < csv.rows.size(); ++r) {
+    const double mean = csv.num(r, "mean_error"), p95 = csv.num(r, "p95_error"),
+                 mx = csv.num(r, "max_error");
+    EXPECT_TRUE(std::isfinite(mean) && mean > 0.0);
+    EXPECT_LE(mean, mx);
+    EXPECT_LE(p95, mx);
+    counts[csv.at(r, "method")].push_back(csv.num(r, "probes"));
+  }
+  // The grid has exactly the counts asked for; automatic stays within its budget; the octree
+  // places more probes at every finer level.
+  EXPECT_EQ(counts["uniform grid"], (std::vector<double>{16, 32}));
+  ASSERT_FALSE(counts["automatic"].empty());
+  for (double c : counts["automatic"]) EXPECT_LE(c, 32.0);
+  ASSERT_EQ(counts["octree corners"].size(), 2u);
+  EXPECT_LT(counts["octree corners"][0], counts["octree corners"][1]);
+}
+
+TEST(Chart, ShIrradianceL2BeatsL1AndWindowedIsNeverNegative) {
+  if (!test::sharedAvailable()) GTEST_SKIP() << "../shared/scenes not available: chart 3 skips";
+  const Csv csv = runChart("sh", "sh_irradiance");
+  std::map<std::string, std::map<std::string, size_t>> row;  // map -> method -> row
+  for (size_t r = 0; r < csv.rows.size(); ++r) row[csv.at(r, "map")][csv.at(r, "method")] = r;
+  EXPECT_GE(row.size(), 1u);
+  for (const auto& [map, methods] : row) {
+    ASSERT_EQ(methods.size(), 4u) << map;
+    // Band 2 is orthogonal to bands 0-1, so adding it cannot increase the L2-norm error of
+    // the irradiance over the sphere (RMS over evenly spread normals approximates it).
+    EXPECT_LT(csv.num(methods.at("L2"), "rms_error_over_max"),
+              csv.num(methods.at("L1"), "rms_error_over_max"))
+        << map;
+    // Deringed and windowed L2 irradiance: never negative anywhere on the sphere (the exact
+    // minimum), up to float rounding.
+    EXPECT_GE(csv.num(methods.at("L2 deringed"), "min_irradiance_over_max"), -1e-5) << map;
+    EXPECT_GE(csv.num(methods.at("L2 Hanning"), "min_irradiance_over_max"), -1e-5) << map;
+    for (const auto& [m, r] : methods) {
+      EXPECT_GE(csv.num(r, "max_rel_error"), csv.num(r, "avg_rel_error")) << map << " " << m;
+      EXPECT_GE(csv.num(r, "max_error_over_max"), csv.num(r, "avg_error_over_max"));
+    }
+  }
+}
+
+TEST(Chart, TetGenAndCgalBuildTheSameTetrahedralization) {
+  const Csv csv = runChart("tetrahedralization", "tetrahedralization");
+  std::map<std::string, std::map<std::string, double>> cells;  // probes -> backend -> cells
+  for (size_t r = 0; r < csv.rows.size(); ++r) {
+    EXPECT_GT(csv.num(r, "median_seconds"), 0.0);
+    EXPECT_LE(csv.num(r, "min_seconds"), csv.num(r, "median_seconds"));
+    EXPECT_LE(csv.num(r, "median_seconds"), csv.num(r, "max_seconds"));
+    cells[csv.at(r, "probes")][csv.at(r, "backend")] = csv.num(r, "inner_cells");
+  }
+  ASSERT_EQ(cells.size(), 2u);
+  for (const auto& [n, byBackend] : cells) {
+    ASSERT_EQ(byBackend.size(), 2u) << n;
+    EXPECT_EQ(byBackend.at("TetGen"), byBackend.at("CGAL")) << n << " probes";
+    // Random points in a cube: about 6.5 tetrahedra per point (Delaunay of a Poisson process
+    // has 6.77 per point in the limit; the hull lowers it for small sets).
+    const double perProbe = byBackend.at("TetGen") / std::stod(n);
+    EXPECT_GT(perProbe, 5.5);
+    EXPECT_LT(perProbe, 6.8);
+  }
+}
+
+TEST(Chart, EveryLookupMethodFindsTheBruteForceTetrahedron) {
+  const Csv csv = runChart("lookup", "probe_lookup");
+  std::map<std::string, std::set<std::string>> methods;
+  for (size_t r = 0; r < csv.rows.size(); ++r) {
+    methods[csv.at(r, "probes")].insert(csv.at(r, "method"));
+    EXPECT_GT(csv.num(r, "checked"), 0.0);
+    EXPECT_EQ(csv.num(r, "agree_brute_force"), csv.num(r, "checked"))
+        << csv.at(r, "probes") << " probes, " << csv.at(r, "method");
+    EXPECT_GT(csv.num(r, "lookups_per_second"), 0.0);
+  }
+  ASSERT_EQ(methods.size(), 2u);
+  for (const auto& [n, m] : methods) EXPECT_EQ(m.size(), 5u) << n;
+}
+
+TEST(Chart, WithoutGnuplotWritesCsvsAndNamesThePackage) {
+  // An empty PATH: no gnuplot to be found.
+  const std::string dir = test::makeTempDir("kiln_chart");
+  const std::string empty = test::makeTempDir("kiln_empty_path");
+  std::string out;
+  const int code = test::runCommand("PATH=" + empty + " " + std::string(test::kilnExe()) +
+                                        " chart --quick -q --only tetrahedralization --out " + dir,
+                                    &out);
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_NE(out.find("gnuplot-nox"), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/tetrahedralization.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/tetrahedralization.png"));
+}
+
+TEST(Chart, BadUsage) {
+  std::string out;
+  EXPECT_EQ(test::runCommand(std::string(test::kilnExe()) + " chart --quick", &out), 2) << out;
+  EXPECT_EQ(test::runCommand(std::string(test::kilnExe()) + " chart --out /tmp/x --only bogus",
+                             &out),
+            2)
+      << out;
+  // An output directory that cannot be created: bad input, named in the message.
+  EXPECT_EQ(test::runCommand(std::string(test::kilnExe()) +
+                                 " chart --quick -q --only tetrahedralization --out /proc/kiln/x",
+                             &out),
+            1)
+      << out;
+  EXPECT_NE(out.find("/proc/kiln/x"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace kiln

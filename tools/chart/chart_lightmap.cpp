@@ -1,0 +1,174 @@
+// chart_lightmap.cpp: chart 1, lightmap samples per texel vs relative error vs bake time, on
+// the Cornell box (chart_measure.h, docs/charts.md).
+#include <chrono>
+#include <cmath>
+
+#include "lightmap/lightmap_baker.h"
+#include "src/gltf_loader.h"
+#include "src/progress.h"
+#include "src/sampling.h"
+#include "tools/chart/chart_measure.h"
+
+namespace kiln::chart {
+namespace {
+
+constexpr uint64_t kReferenceTag = 0x7265666572656eULL;  // "referen": the reference's seed
+
+struct ErrorSums {
+  double diff2 = 0.0, ref2 = 0.0;
+  size_t texels = 0;
+};
+
+// Sums over texels valid in both bakes (RGB) of the squared difference and squared reference.
+ErrorSums compareBakes(const LightmapBakeResult& a, const LightmapBakeResult& reference) {
+  ErrorSums s;
+  for (size_t p = 0; p < a.pages.size() && p < reference.pages.size(); ++p) {
+    const LightmapPageResult& x = a.pages[p];
+    const LightmapPageResult& r = reference.pages[p];
+    for (size_t i = 0; i < x.valid.size(); ++i) {
+      if (!x.valid[i] || !r.valid[i]) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = double(x.light.pixels[3 * i + c]) - double(r.light.pixels[3 * i + c]);
+        const double v = double(r.light.pixels[3 * i + c]);
+        s.diff2 += d * d;
+        s.ref2 += v * v;
+      }
+      ++s.texels;
+    }
+  }
+  return s;
+}
+
+}  // namespace
+
+Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
+  const std::string path = o.scenesDir + "/cornell_box.gltf";
+  Result<Scene> scene = loadScene(path);
+  if (!scene) return Error{scene.error()};
+
+  LightmapBakeSettings s;
+  s.resolution = o.quick ? 8.0f : 14.0f;
+  s.maxSize = 256;
+  s.bounces = 3;
+  s.denoise = false;
+  s.stitchSeams = false;
+  s.seed = o.seed;
+  s.threads = o.threads;
+  const std::vector<int> samples =
+      o.quick ? std::vector<int>{4, 16, 64} : std::vector<int>{4, 16, 64, 256, 1024};
+  const int referenceSamples = 16 * samples.back();
+  const int repeats = o.quick ? 1 : 3;
+  const std::vector<bool> denoised = {false, true};
+
+  Progress progress("chart lightmap", 1 + samples.size() * denoised.size() * size_t(repeats),
+                    "bakes", o.progress);
+  auto timedBake = [&](const LightmapBakeSettings& settings,
+                       double* seconds) -> Result<LightmapBakeResult> {
+    const auto t0 = std::chrono::steady_clock::now();
+    Result<LightmapBakeResult> r = bakeLightmaps(*scene, settings, false, o.cancel);
+    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress.advance();
+    if (!r) return Error{path + ": " + r.error()};
+    return r;
+  };
+
+  // The reference: the same bake with 16x the largest sample count and an independent seed,
+  // so that its own noise adds (1/16 of the largest count's variance) rather than cancels.
+  LightmapBakeSettings refSettings = s;
+  refSettings.samplesPerTexel = referenceSamples;
+  refSettings.seed = hashValues(o.seed, kReferenceTag);
+  double refSeconds = 0.0;
+  Result<LightmapBakeResult> reference = timedBake(refSettings, &refSeconds);
+  if (!reference) return Error{reference.error()};
+
+  // Every (variant, count) bake `repeats` times, the repeats interleaved: round r bakes every
+  // variant once, so that a slow spell of the machine hits all variants alike. Outputs are
+  // bit-identical across repeats (deterministic bake); the error is taken from the first.
+  struct Cell {
+    std::vector<double> wall, light;
+    ErrorSums error;
+    uint64_t rays = 0;
+  };
+  std::vector<Cell> cells(samples.size() * denoised.size());
+  for (int r = 0; r < repeats; ++r)
+    for (size_t v = 0; v < denoised.size(); ++v)
+      for (size_t k = 0; k < samples.size(); ++k) {
+        LightmapBakeSettings settings = s;
+        settings.samplesPerTexel = samples[k];
+        settings.denoise = denoised[v];
+        double wall = 0.0;
+        Result<LightmapBakeResult> bake = timedBake(settings, &wall);
+        if (!bake) return Error{bake.error()};
+        Cell& c = cells[v * samples.size() + k];
+        c.wall.push_back(wall);
+        c.light.push_back(bake->stats.seconds);
+        if (r == 0) {
+          c.error = compareBakes(*bake, *reference);
+          c.rays = bake->stats.rays;
+        }
+      }
+  progress.finish();
+
+  ChartTable t;
+  t.name = "lightmap_samples";
+  t.title = "Lightmap: samples per texel vs error vs bake time (cornell_box)";
+  t.columns = {"variant", "samples", "relative_rms_error", "rms_error", "bake_seconds",
+               "light_seconds", "rays", "texels", "repeats", "reference_samples"};
+  std::vector<double> xs, ys;
+  for (size_t v = 0; v < denoised.size(); ++v)
+    for (size_t k = 0; k < samples.size(); ++k) {
+      const Cell& c = cells[v * samples.size() + k];
+      const double n = double(std::max<size_t>(c.error.texels, 1)) * 3.0;
+      const double rms = std::sqrt(c.error.diff2 / n);
+      const double rel = c.error.ref2 > 0.0 ? std::sqrt(c.error.diff2 / c.error.ref2) : 0.0;
+      if (!denoised[v]) {
+        xs.push_back(samples[k]);
+        ys.push_back(rel);
+      }
+      t.addRow({denoised[v] ? "denoised" : "raw", std::to_string(samples[k]), num(rel), num(rms),
+                num(median(c.wall)), num(median(c.light)), std::to_string(c.rays),
+                std::to_string(c.error.texels), std::to_string(repeats),
+                std::to_string(referenceSamples)});
+    }
+  const double slope = logLogSlope(xs, ys);
+
+  t.notes = commonNotes(o, o.threads);
+  t.notes.push_back("chart 1: lightmap samples per texel vs relative error vs bake time");
+  t.notes.push_back("scene: " + path + " (emissive ceiling light)");
+  t.notes.push_back("settings: resolution " + num(s.resolution) +
+                    " texels/unit, maxSize 256, 3 bounces, supersampling 1, stitching off; "
+                    "variant raw = denoiser off, denoised = kiln's edge-aware denoiser on");
+  t.notes.push_back("baseline: a reference bake of the same settings (denoiser off) with " +
+                    std::to_string(referenceSamples) + " samples/texel and an independent seed (" +
+                    num(refSeconds) + " s)");
+  t.notes.push_back("relative_rms_error = sqrt(sum (x - ref)^2 / sum ref^2) over RGB of the "
+                    "texels valid in both; rms_error in lightmap units (E / pi)");
+  t.notes.push_back("timing: bake_seconds = wall time of bakeLightmaps (all stages), "
+                    "light_seconds = its light stage; median of " + std::to_string(repeats) +
+                    " repeats, interleaved (each round bakes every variant and count once)");
+  t.notes.push_back("fitted log-log slope of raw error vs samples: " + num(slope) +
+                    " (Monte Carlo: -0.5)");
+
+  const double e0 = ys.empty() ? 1.0 : ys.front();
+  const double n0 = xs.empty() ? 1.0 : xs.front();
+  t.plot =
+      "set logscale xy 2\n"
+      "set logscale y2 10\n"
+      "set format y '%g'\nset format y2 '%g'\n"
+      "set xlabel 'samples per texel'\n"
+      "set ylabel 'relative RMS error vs reference'\n"
+      "set y2label 'bake time (s)'\n"
+      "set ytics nomirror\nset y2tics\n"
+      "set key top right\n"
+      "plot @CSV@ using 'samples':(strcol('variant') eq 'raw' ? column('relative_rms_error') : "
+      "NaN) with linespoints lw 2 pt 7 title 'error, denoiser off', \\\n"
+      "  '' using 'samples':(strcol('variant') eq 'denoised' ? column('relative_rms_error') : "
+      "NaN) with linespoints lw 2 pt 5 title 'error, denoised', \\\n"
+      "  '' using 'samples':(strcol('variant') eq 'raw' ? " + num(e0) + " * sqrt(" + num(n0) +
+      " / column('samples')) : NaN) with lines dt 2 lc rgb 'gray40' title '1/sqrt(N) guide', \\\n"
+      "  '' using 'samples':(strcol('variant') eq 'raw' ? column('bake_seconds') : NaN) axes "
+      "x1y2 with linespoints dt 3 pt 6 lc rgb 'dark-orange' title 'bake time (right axis)'\n";
+  return t;
+}
+
+}  // namespace kiln::chart
