@@ -55,7 +55,58 @@ bool isSoft(const Light& light) {
 
 bool isBlack(vec3 c) { return !(maxComponent(c) > 0.0f); }
 
+// Position and shading normal at a point of a triangle in one fetch of its vertices: the
+// same arithmetic as Scene::positionAt and Scene::shadingNormalAt (bit for bit), which the
+// path vertex needs together.
+struct SurfaceFrame {
+  vec3 position;
+  vec3 shadingNormal;
+};
+
+SurfaceFrame surfaceAt(const Object& o, uint32_t triangle, vec2 bary) {
+  const uvec3 tri = o.triangles[triangle];
+  const float b0 = 1.0f - bary.x - bary.y;
+  SurfaceFrame f;
+  f.position = b0 * o.positions[tri.x] + bary.x * o.positions[tri.y] + bary.y * o.positions[tri.z];
+  if (o.normals.empty()) {
+    f.shadingNormal = o.faceNormal(triangle);
+  } else {
+    const vec3 n = b0 * o.normals[tri.x] + bary.x * o.normals[tri.y] + bary.y * o.normals[tri.z];
+    const float len = glm::length(n);
+    f.shadingNormal = len > 1e-12f ? n / len : o.faceNormal(triangle);
+  }
+  return f;
+}
+
+// Integrator::albedoAt's clamp and boost of a bounce albedo.
+vec3 boostAlbedo(vec3 albedo, float boost) {
+  vec3 a = glm::clamp(albedo, 0.0f, 1.0f);
+  if (boost != 1.0f) a = glm::pow(a, vec3(1.0f / boost));
+  return a;
+}
+
+vec3 positionOn(const Object& o, uint32_t triangle, vec2 bary) {
+  const uvec3 tri = o.triangles[triangle];
+  return (1.0f - bary.x - bary.y) * o.positions[tri.x] + bary.x * o.positions[tri.y] +
+         bary.y * o.positions[tri.z];
+}
+
 }  // namespace
+
+// What the path tracer needs of each material, evaluated once: flags, and the albedo and
+// emission of untextured materials (the common case), which are then constants per hit.
+struct Integrator::MaterialTable {
+  struct Entry {
+    vec3 albedo{0.0f};    // albedoAt's value (boost applied) when !albedoTextured
+    vec3 emission{0.0f};  // emissionAt's value when !emissionTextured
+    bool albedoTextured = false;
+    bool emissionTextured = false;
+    bool emissive = false;
+    bool doubleSided = false;
+    AlphaMode alphaMode = AlphaMode::Opaque;
+  };
+  std::vector<Entry> entries;
+};
 
 // Emissive triangles with their sampling distribution (by power) and the reverse map from
 // (object, triangle) to table entry for MIS weights of BSDF-sampled hits.
@@ -64,6 +115,11 @@ struct Integrator::EmitterTable {
     uint32_t object;
     uint32_t triangle;
     float area;  // m^2
+    // Copies of what sampling needs, so that a light sample touches one record: the
+    // vertices, Object::faceNormal, the material index.
+    vec3 p0, p1, p2;
+    vec3 normal;
+    uint32_t material;
   };
   std::vector<Emitter> emitters;
   Distribution1D distribution;       // over emitters, weight = power
@@ -105,7 +161,10 @@ Integrator::Integrator(const Scene& scene, const Tracer& tracer, IntegratorSetti
       // Power (up to the constant pi): area x radiance, both faces when double-sided.
       const float p = area * luminance(radiance) * (m.doubleSided ? 2.0f : 1.0f);
       if (!(p > 0.0f) || !(area > 0.0f)) continue;
-      table->emitters.push_back({o, t, area});
+      const uvec3 tri = object.triangles[t];
+      table->emitters.push_back({o, t, area, object.positions[tri.x], object.positions[tri.y],
+                                 object.positions[tri.z], object.faceNormal(t),
+                                 object.triangleMaterial[t]});
       power.push_back(p);
     }
   }
@@ -123,6 +182,22 @@ Integrator::Integrator(const Scene& scene, const Tracer& tracer, IntegratorSetti
       table->emitterOf[table->objectOffset[e.object] + e.triangle] = int32_t(i);
     }
   }
+  auto materials = std::make_shared<MaterialTable>();
+  materials->entries.resize(scene.materials.size());
+  for (size_t i = 0; i < scene.materials.size(); ++i) {
+    const Material& m = scene.materials[i];
+    MaterialTable::Entry& e = materials->entries[i];
+    e.albedoTextured = m.baseColorTexture >= 0;
+    if (!e.albedoTextured)
+      e.albedo = boostAlbedo(Scene::bounceAlbedo(m, vec3(m.baseColorFactor)), settings_.albedoBoost);
+    e.emission = m.emissiveFactor * m.emissiveStrength;
+    e.emissionTextured = m.emissiveTexture >= 0 && maxComponent(e.emission) > 0.0f;
+    e.emissive = m.isEmissive();
+    e.doubleSided = m.doubleSided;
+    e.alphaMode = m.alphaMode;
+  }
+  materials_ = std::move(materials);
+
   sampleEmissive_ =
       settings_.includeEmissive && !table->emitters.empty() && table->distribution.total() > 0.0f;
   sampleSky_ = settings_.includeSky && !scene.sky.isBlack();
@@ -229,23 +304,25 @@ vec3 Integrator::sampleEmitters(vec3 x, vec3 ns, vec3 ng, float uSelect, vec2 uP
   if (!(pmf > 0.0f)) return vec3(0.0f);
   const auto& e = table.emitters[index];
   const vec2 bary = squareToTriangle(uPoint);
-  const vec3 y = scene_.positionAt(e.object, e.triangle, bary);
+  // Scene::positionAt's arithmetic on the copied vertices.
+  const vec3 y = (1.0f - bary.x - bary.y) * e.p0 + bary.x * e.p1 + bary.y * e.p2;
   const vec3 d = y - x;
   const float dist2 = glm::dot(d, d);
   if (!(dist2 > 1e-12f)) return vec3(0.0f);
   const vec3 wi = d / std::sqrt(dist2);
   const float cosX = glm::dot(ns, wi);
   if (cosX <= 0.0f || glm::dot(ng, wi) <= 0.0f) return vec3(0.0f);
-  const Material& m = scene_.materialOf(e.object, e.triangle);
-  const vec3 nl = scene_.objects[e.object].faceNormal(e.triangle);
+  const MaterialTable::Entry& m = materials_->entries[e.material];
+  const vec3 nl = e.normal;
   float cosL = -glm::dot(nl, wi);  // > 0: x sees the front face
   if (cosL <= 0.0f && !m.doubleSided) return vec3(0.0f);
   cosL = std::abs(cosL);
   if (cosL < 1e-7f) return vec3(0.0f);
   if (m.alphaMode == AlphaMode::Mask &&
-      scene_.baseColorAt(e.object, e.triangle, bary).a < m.alphaCutoff)
+      scene_.baseColorAt(e.object, e.triangle, bary).a < scene_.materials[e.material].alphaCutoff)
     return vec3(0.0f);  // a cut-out hole emits nothing (the tracer lets rays through it)
-  const vec3 le = scene_.emissionAt(e.object, e.triangle, bary);
+  const vec3 le =
+      m.emissionTextured ? scene_.emissionAt(e.object, e.triangle, bary) : m.emission;
   if (isBlack(le)) return vec3(0.0f);
   const float pdfLight = pmf / e.area * dist2 / cosL;
   const float weight = powerHeuristic(pdfLight, cosX * kInvPi);
@@ -277,10 +354,10 @@ float Integrator::emitterPdf(uint32_t object, uint32_t triangle, float distance2
   return emitters_->distribution.pmf(size_t(i)) / area * distance2 / std::max(cosLight, 1e-7f);
 }
 
+// The albedo a path bounces with (tracePath uses MaterialTable's constant when the material
+// has no base colour texture; this is the same value).
 vec3 Integrator::albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const {
-  vec3 a = glm::clamp(scene_.bounceAlbedoAt(object, triangle, bary), 0.0f, 1.0f);
-  if (settings_.albedoBoost != 1.0f) a = glm::pow(a, vec3(1.0f / settings_.albedoBoost));
-  return a;
+  return boostAlbedo(scene_.bounceAlbedoAt(object, triangle, bary), settings_.albedoBoost);
 }
 
 // Follows `ray` from a vertex (vertex 0) through path vertices 1, 2, ... and accumulates
@@ -298,29 +375,34 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
   for (uint32_t vertex = 1;; ++vertex) {
     vec3& out = vertex == 1 ? direct : indirect;
     // Find the vertex, crossing the BLEND surfaces the path chooses to pass through.
-    std::optional<Hit> hit;
+    Hit h;
+    bool hit = false;
     int passes = 0;
     for (;;) {
       ++tRayCount;
-      hit = tracer_.intersect(ray);
+      hit = tracer_.intersect(ray, h);
       if (!hit) break;
-      const Material& m = scene_.materialOf(hit->object, hit->triangle);
-      if (settings_.includeEmissive && m.isEmissive() && (!hit->backFace || m.doubleSided)) {
-        const vec3 le = scene_.emissionAt(hit->object, hit->triangle, hit->bary);
+      const Object& object = scene_.objects[h.object];
+      const MaterialTable::Entry& m =
+          materials_->entries[object.triangleMaterial[h.triangle]];
+      if (settings_.includeEmissive && m.emissive && (!h.backFace || m.doubleSided)) {
+        const vec3 le = m.emissionTextured
+                            ? scene_.emissionAt(h.object, h.triangle, h.bary)
+                            : m.emission;
         float weight = 1.0f;
         if (bsdfPdf > 0.0f && sampleEmissive_) {
-          const vec3 y = scene_.positionAt(hit->object, hit->triangle, hit->bary);
+          const vec3 y = positionOn(object, h.triangle, h.bary);
           const vec3 d = y - from;
-          const float cosL = std::abs(glm::dot(hit->geometricNormal, ray.direction));
+          const float cosL = std::abs(glm::dot(h.geometricNormal, ray.direction));
           weight =
-              powerHeuristic(bsdfPdf, emitterPdf(hit->object, hit->triangle, glm::dot(d, d), cosL));
+              powerHeuristic(bsdfPdf, emitterPdf(h.object, h.triangle, glm::dot(d, d), cosL));
         }
         out += beta * le * weight;
       }
       if (m.alphaMode != AlphaMode::Blend) break;
       // BLEND: pass straight through with probability 1 - alpha, tinted by the base colour,
       // which matches Tracer::transmittance's (1 - alpha) x baseColor in expectation.
-      const vec4 base = scene_.baseColorAt(hit->object, hit->triangle, hit->bary);
+      const vec4 base = scene_.baseColorAt(h.object, h.triangle, h.bary);
       const float u = passes == 0
                           ? draw1D(stream, vertex, kSlotBlend)
                           : SampleStream(hashValues(key, kBlendTag,
@@ -330,8 +412,8 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
       if (u >= 1.0f - base.a) break;  // reflect here
       beta *= vec3(base);
       if (++passes > kMaxPassThroughs || isBlack(beta)) return;
-      const vec3 y = scene_.positionAt(hit->object, hit->triangle, hit->bary);
-      const vec3 ng = hit->geometricNormal;
+      const vec3 y = positionOn(object, h.triangle, h.bary);
+      const vec3 ng = h.geometricNormal;
       ray.origin = offsetRayOrigin(y, glm::dot(ng, ray.direction) > 0.0f ? ng : -ng);
       ray.tMin = 0.0f;
       ray.tMax = kInfinity;
@@ -346,8 +428,8 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
       }
       return;
     }
-    const Hit& h = *hit;
-    const Material& m = scene_.materialOf(h.object, h.triangle);
+    const Object& object = scene_.objects[h.object];
+    const MaterialTable::Entry& m = materials_->entries[object.triangleMaterial[h.triangle]];
     if (vertex == 1 && backFaceHits && h.backFace && !m.doubleSided &&
         m.alphaMode != AlphaMode::Blend)
       ++*backFaceHits;
@@ -356,12 +438,13 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
     // Vertex maxBounces + 1 only completes the MIS of vertex maxBounces's emitter NEE.
     if (vertex > uint32_t(settings_.maxBounces)) return;
 
-    const vec3 y = scene_.positionAt(h.object, h.triangle, h.bary);
+    const SurfaceFrame surface = surfaceAt(object, h.triangle, h.bary);
+    const vec3 y = surface.position;
     const vec3 ng = h.backFace ? -h.geometricNormal : h.geometricNormal;
-    vec3 ns = scene_.shadingNormalAt(h.object, h.triangle, h.bary);
+    vec3 ns = surface.shadingNormal;
     if (h.backFace) ns = -ns;
     if (glm::dot(ns, ng) <= 0.0f) ns = ng;  // a shading normal past the horizon: don't trust it
-    beta *= albedoAt(h.object, h.triangle, h.bary);
+    beta *= m.albedoTextured ? albedoAt(h.object, h.triangle, h.bary) : m.albedo;
     if (isBlack(beta)) return;
 
     // NEE at this vertex: light reflected here has bounced at least once. Lambert's BRDF is

@@ -108,6 +108,7 @@ class Integrator {
 
  private:
   struct EmitterTable;
+  struct MaterialTable;
   enum class ShadowKind { Any, Hard, Soft };
   // Helpers, defined and documented in integrator.cpp.
   vec3 transmittance(vec3 origin, vec3 direction, float tMax) const;
@@ -128,6 +129,7 @@ class Integrator {
   const Tracer& tracer_;
   IntegratorSettings settings_;
   std::shared_ptr<const EmitterTable> emitters_;
+  std::shared_ptr<const MaterialTable> materials_;  // per Scene::materials entry
   bool sampleEmissive_ = false;  // emitter NEE runs (includeEmissive and emitters exist)
   bool sampleSky_ = false;       // sky NEE runs (includeSky and the sky is not black)
 };

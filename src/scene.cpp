@@ -102,8 +102,10 @@ vec3 Scene::emissionAt(uint32_t object, uint32_t triangle, vec2 bary) const {
 }
 
 vec3 Scene::bounceAlbedoAt(uint32_t object, uint32_t triangle, vec2 bary) const {
-  const Material& m = materialOf(object, triangle);
-  const vec3 base = vec3(baseColorAt(object, triangle, bary));
+  return bounceAlbedo(materialOf(object, triangle), vec3(baseColorAt(object, triangle, bary)));
+}
+
+vec3 Scene::bounceAlbedo(const Material& m, vec3 base) {
   // Dielectrics: Lambertian with the base colour (as Cycles' diffuse bake treats them; their
   // 4% specular mostly leaves as glossy reflection a diffuse baker cannot place). Metals: no
   // diffuse; specular (F0 = base colour) x roughness x 0.5, as Unity's meta pass

@@ -156,6 +156,9 @@ struct Scene {
   // colour; metals add specular x roughness x 0.5 as Unity's meta pass does:
   // albedo = base * (1 - metallic) + base * metallic * roughness * 0.5.
   vec3 bounceAlbedoAt(uint32_t object, uint32_t triangle, vec2 bary) const;
+  // The same albedo from a material and its base colour (rgb) at the point: what
+  // bounceAlbedoAt returns, so that callers may evaluate untextured materials once.
+  static vec3 bounceAlbedo(const Material& m, vec3 baseColor);
   // Shading normal (interpolated vertex normals, unit length) at a point of a triangle.
   vec3 shadingNormalAt(uint32_t object, uint32_t triangle, vec2 bary) const;
   vec3 positionAt(uint32_t object, uint32_t triangle, vec2 bary) const;

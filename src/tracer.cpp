@@ -50,20 +50,26 @@ bool mayBeCutOut(const Scene& scene, const Object& object) {
   return false;
 }
 
+RTCRay makeRay(const Ray& ray) {
+  RTCRay r;
+  r.org_x = ray.origin.x;
+  r.org_y = ray.origin.y;
+  r.org_z = ray.origin.z;
+  r.dir_x = ray.direction.x;
+  r.dir_y = ray.direction.y;
+  r.dir_z = ray.direction.z;
+  r.tnear = ray.tMin;
+  r.tfar = ray.tMax;
+  r.time = 0.0f;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+  return r;
+}
+
 RTCRayHit makeRayHit(const Ray& ray) {
   RTCRayHit rh;
-  rh.ray.org_x = ray.origin.x;
-  rh.ray.org_y = ray.origin.y;
-  rh.ray.org_z = ray.origin.z;
-  rh.ray.dir_x = ray.direction.x;
-  rh.ray.dir_y = ray.direction.y;
-  rh.ray.dir_z = ray.direction.z;
-  rh.ray.tnear = ray.tMin;
-  rh.ray.tfar = ray.tMax;
-  rh.ray.time = 0.0f;
-  rh.ray.mask = 0xFFFFFFFFu;
-  rh.ray.id = 0;
-  rh.ray.flags = 0;
+  rh.ray = makeRay(ray);
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -248,13 +254,18 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
 }
 
 std::optional<Hit> Tracer::intersect(const Ray& ray) const {
+  Hit hit;
+  if (!intersect(ray, hit)) return std::nullopt;
+  return hit;
+}
+
+bool Tracer::intersect(const Ray& ray, Hit& hit) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh = makeRayHit(ray);
   rtcIntersect1(impl_->rtcScene, &context, &rh);
-  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return std::nullopt;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
 
-  Hit hit;
   hit.t = rh.ray.tfar;
   hit.object = rh.hit.geomID;
   hit.triangle = rh.hit.primID;
@@ -265,7 +276,7 @@ std::optional<Hit> Tracer::intersect(const Ray& ray) const {
   if (n == vec3(0.0f)) n = -glm::normalize(ray.direction);  // no area: cannot be hit
   hit.geometricNormal = n;
   hit.backFace = glm::dot(ray.direction, n) > 0.0f;
-  return hit;
+  return true;
 }
 
 bool Tracer::occluded(const Ray& ray) const {
@@ -274,10 +285,10 @@ bool Tracer::occluded(const Ray& ray) const {
   if (!(ray.tMin <= ray.tMax)) return false;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  RTCRayHit rh = makeRayHit(ray);
-  rtcOccluded1(impl_->rtcScene, &context, &rh.ray);
+  RTCRay r = makeRay(ray);
+  rtcOccluded1(impl_->rtcScene, &context, &r);
   // Embree marks an occluded ray by setting tfar to -infinity.
-  return rh.ray.tfar < 0.0f && std::isinf(rh.ray.tfar);
+  return r.tfar < 0.0f && std::isinf(r.tfar);
 }
 
 vec3 Tracer::transmittance(const Ray& ray) const {

@@ -46,6 +46,9 @@ class Tracer {
 
   // Closest hit in (tMin, tMax), or nothing.
   std::optional<Hit> intersect(const Ray& ray) const;
+  // The same query writing into `hit`: true (and `hit` filled) when there is a hit, false
+  // (and `hit` unchanged) otherwise. Saves the optional's copy on hot paths.
+  bool intersect(const Ray& ray, Hit& hit) const;
   // True when anything (including BLEND surfaces) lies in (tMin, tMax).
   bool occluded(const Ray& ray) const;
   // Fraction of light that passes along the segment: 0 when an opaque surface lies in
