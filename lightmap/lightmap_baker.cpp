@@ -10,8 +10,15 @@
 //     union of a texel's paths is one stratified Sobol prefix (better than independent
 //     streams per point) and nothing depends on the thread that ran it.
 //   - Validity is decided per sample point: a point whose first rays see back faces more
-//     often than backfaceTolerance is inside geometry and is dropped; a texel is invalid
-//     when all its points are (then filled from valid neighbours).
+//     often than backfaceTolerance is inside geometry and is dropped from its texel's value
+//     (a valid texel holds the mean over its unoccluded points); a texel is invalid when all
+//     its points are. Invalid texels: those within one ring (8-neighbours) of a valid texel
+//     of their object are filled from their valid neighbours, because a bilinear lookup at a
+//     visible surface point can read them; deeper ones (a floor under a block, a ceiling
+//     behind a lamp) keep the mean over all their samples, the physical irradiance of a
+//     surface enclosed by geometry (~0: paths end on back faces, shadow rays are blocked).
+//     Filling those from lit neighbours too (kiln's first policy) invents light that no
+//     surface point there receives; Cycles bakes them black.
 //   - Post order: denoise (valid texels only), then fill invalid texels from the denoised
 //     values (so filled texels inherit no noise), dilate into padding, stitch seams.
 //   - Mixed lighting: the integrator's directLights / indirectLights come from
@@ -147,9 +154,14 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
 }
 
 // Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
+// `pushed` gets, per page and texel, 1 where the texel's main sample point (its centre)
+// was moved: the centre lies inside a solid, not on the visible surface.
 bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                   const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
-                  bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays) {
+                  bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays,
+                  std::vector<std::vector<uint8_t>>& pushed) {
+  pushed.resize(pages.size());
+  for (size_t p = 0; p < pages.size(); ++p) pushed[p].assign(pages[p].texels.size(), 0);
   Progress progress("push-out", texels.size(), "texels", showProgress);
   options.progress = &progress;
   options.grain = 64;
@@ -162,7 +174,9 @@ bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& t
           TexelSample& texel = page.texels[texels[i].index];
           const uint32_t object = uint32_t(texel.object);
           const float reach = kPushReachTexels / layout.objects[object].texelsPerUnit;
+          const vec3 centre = texel.sample.position;
           local += pushOutPoint(scene, tracer, object, reach, texel.sample);
+          pushed[texels[i].page][texels[i].index] = texel.sample.position != centre ? 1 : 0;
           for (uint32_t s = 0; s < texel.subsampleCount; ++s)
             local += pushOutPoint(scene, tracer, object, reach,
                                   page.subsamples[texel.firstSubsample + s]);
@@ -214,19 +228,38 @@ struct LightSettings {
   const ChannelLights* shadowmask = nullptr;  // null: no shadowmask
 };
 
+// Running sums over sample points (each term x the point's sample count).
+struct PointSums {
+  glm::dvec3 light{0.0};        // irradiance E
+  glm::dvec3 direction{0.0};    // luminance-weighted directions
+  vec3 normal{0.0f};            // sum of the points' normals (not weighted)
+  glm::dvec4 visibility{0.0};   // per shadowmask channel
+  double aoOccluded = 0.0;      // AO rays that hit something
+  uint32_t samples = 0;
+
+  void add(const PointSums& o) {
+    light += o.light;
+    direction += o.direction;
+    normal += o.normal;
+    visibility += o.visibility;
+    aoOccluded += o.aoOccluded;
+    samples += o.samples;
+  }
+};
+
 // Stage 5, one texel: samples split evenly over its points (point i takes indices
 // [i S / k, (i + 1) S / k) of the texel's stream), each point's share in kVarianceBatches
-// batches; points inside geometry (back-face share > tolerance) are dropped.
+// batches. Points inside geometry (back-face share > tolerance) are left out of a valid
+// texel's value, which is then the mean over the texel's unoccluded points (what a visible
+// surface point near the texel sees). A texel with no such point is invalid; its value is
+// then the plain mean over all its points: the physical irradiance of a surface enclosed by
+// geometry, ~0 (paths end at back faces, shadow rays are blocked), which is what it keeps
+// unless it is next to a valid texel (lightmap_baker.h, postPage).
 TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
                       const TexelPoint* points, uint32_t pointCount, uint64_t& aoRays) {
   TexelLight out;
-  glm::dvec3 sum(0.0);
-  uint32_t used = 0;
-  double aoOccluded = 0.0;
+  PointSums used, all;
   std::vector<std::pair<double, uint32_t>> batches;  // (luminance of batch mean, size)
-  glm::dvec3 directionSum(0.0);  // luminance-weighted directions x sample count
-  vec3 normalSum(0.0f);
-  glm::dvec4 visibilitySum(0.0);  // per channel, x sample count
   for (uint32_t i = 0; i < pointCount; ++i) {
     const uint32_t first = uint32_t(uint64_t(i) * s.samples / pointCount);
     const uint32_t count = uint32_t(uint64_t(i + 1) * s.samples / pointCount) - first;
@@ -234,9 +267,10 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     const TexelPoint& p = points[i];
     uint32_t backFaces = 0;
     const uint32_t nb = std::min(kVarianceBatches, count);
-    glm::dvec3 pointSum(0.0);
+    PointSums point;
+    point.samples = count;
+    point.normal = p.normal;
     const size_t batchStart = batches.size();
-    glm::dvec3 pointDirection(0.0);
     for (uint32_t b = 0; b < nb; ++b) {
       const uint32_t bFirst = first + b * count / nb;
       const uint32_t bCount = first + (b + 1) * count / nb - bFirst;
@@ -245,18 +279,12 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
                          .irradiance(p.position, p.normal, key, bFirst, bCount, &backFaces,
                                      s.directional ? &direction : nullptr)
                          .total();
-      pointSum += glm::dvec3(e) * double(bCount);
-      pointDirection += glm::dvec3(direction) * double(bCount);
+      point.light += glm::dvec3(e) * double(bCount);
+      point.direction += glm::dvec3(direction) * double(bCount);
       batches.push_back({double(luminance(e)) * kInvPi, bCount});
     }
-    if (float(backFaces) > s.backfaceTolerance * float(count)) {
-      batches.resize(batchStart);  // inside geometry: this point does not count
-      continue;
-    }
-    sum += pointSum;
-    used += count;
-    directionSum += pointDirection;
-    normalSum += p.normal;
+    const bool inside = float(backFaces) > s.backfaceTolerance * float(count);
+    if (inside) batches.resize(batchStart);  // does not count towards a valid texel's value
     if (s.shadowmask) {
       // Each channel: the visibility of the one light of that channel reaching p, averaged
       // over the point's samples when the light's shadows are soft (one evaluation when
@@ -280,7 +308,7 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
           }
           break;
         }
-        visibilitySum[c] += v;
+        point.visibility[c] = v;
       }
     }
     if (s.ambientOcclusion) {
@@ -292,27 +320,31 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
         SampleStream stream(aoKey, j);
         const vec3 dir = frame.toWorld(squareToCosineHemisphere(stream.get2D()));
         if (integrator.tracer().occluded(Ray{origin, dir, 0.0f, s.aoMaxDistance}))
-          aoOccluded += 1.0;
+          point.aoOccluded += 1.0;
       }
       aoRays += count;
     }
+    all.add(point);
+    if (!inside) used.add(point);
   }
-  if (used == 0) return out;
-  out.valid = true;
-  out.value = vec3(sum / double(used)) * kInvPi;
-  if (s.shadowmask) out.shadowmask = glm::clamp(vec4(visibilitySum / double(used)), 0.0f, 1.0f);
+  out.valid = used.samples > 0;
+  const PointSums& sums = out.valid ? used : all;
+  if (sums.samples == 0) return out;
+  const double n = double(sums.samples);
+  out.value = vec3(sums.light / n) * kInvPi;
+  if (s.shadowmask) out.shadowmask = glm::clamp(vec4(sums.visibility / n), 0.0f, 1.0f);
   if (s.directional) {
-    const float len = glm::length(normalSum);
-    const vec3 n = len > 0.0f ? normalSum / len : vec3(0.0f);
-    out.direction = encodeDominantDirection(vec3(directionSum / double(used)),
-                                            luminance(vec3(sum / double(used))), n);
+    const float len = glm::length(sums.normal);
+    const vec3 normal = len > 0.0f ? sums.normal / len : vec3(0.0f);
+    out.direction = encodeDominantDirection(vec3(sums.direction / n),
+                                            luminance(vec3(sums.light / n)), normal);
   }
-  if (s.ambientOcclusion) out.ao = 1.0f - s.aoAmount * float(aoOccluded / double(used));
+  if (s.ambientOcclusion) out.ao = 1.0f - s.aoAmount * float(sums.aoOccluded / n);
   // Variance of the mean from the spread of the batch means (batches of near-equal size).
-  if (batches.size() >= 2) {
+  if (out.valid && batches.size() >= 2) {
     const double mean = double(luminance(out.value));
     double ss = 0.0;
-    for (const auto& [l, n] : batches) ss += (l - mean) * (l - mean);
+    for (const auto& [l, count] : batches) ss += (l - mean) * (l - mean);
     const double m = double(batches.size());
     out.variance = float(ss / (m * (m - 1.0)));
   }
@@ -349,7 +381,8 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
 
 // Stage 6 for one page: denoise, fill invalid texels, dilate into padding, stitch seams.
 void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
-              const RasterPage& raster, const std::vector<TexelRef>& texels,
+              const RasterPage& raster, const std::vector<uint8_t>& pushed,
+              const std::vector<TexelRef>& texels,
               const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
               bool withShadowmask, const ParallelOptions& parallel,
               LightmapPageResult& result) {
@@ -388,8 +421,20 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   result.valid = page.valid;
   result.position = page.position;
 
+  // Invalid texels (inside geometry): those next to a valid texel of their object whose
+  // centre is on the visible surface (not moved by push-out) are read by bilinear lookups at
+  // visible points, so they take the inverse-square average of their valid 8-neighbours
+  // (radius 1.5 texels: only the adjacent ones, so a texel under a thin wall takes the side
+  // it touches, not light from across the wall). The others are more than a texel from any
+  // visible point and keep their physical value (lightTexel: ~0), as an independent renderer
+  // bakes them (docs/lightmap_outputs.md).
+  std::vector<uint8_t> visibleCentre(n, 0);
+  for (size_t t = 0; t < n; ++t) visibleCentre[t] = raster.texels[t].valid() && !pushed[t];
   FillSettings fill;
   fill.parallel = parallel;
+  fill.radius = 1.5f;
+  fill.maxRings = 1;
+  fill.ringSeeds = &visibleCentre;
   DenoiseSettings denoiseSettings;
   denoiseSettings.parallel = parallel;
   if (settings.denoise) denoise(page, denoiseSettings);
@@ -410,11 +455,12 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
 
   // Shadowmask and direction maps: no denoising (see lightmap_baker.h), the same fill,
   // dilation and stitching as the light, so that bilinear lookups at chart borders and
-  // seams read the same texels in every map. Unset texels start unshadowed / undirected.
+  // seams read the same texels in every map. Padding starts unshadowed / undirected (what
+  // dilation does not reach keeps it); invalid texels hold their own estimate (lightTexel).
   for (Image* image : {&shadowmask, &direction}) {
     if (image->empty()) continue;
     for (size_t t = 0; t < n; ++t)
-      if (!page.valid[t])
+      if (page.objectId[t] < 0)
         for (int c = 0; c < 4; ++c)
           image->pixels[4 * t + c] = image == &shadowmask ? 1.0f : 0.5f;
     const std::vector<uint8_t> f = fillInvalid(*image, page.valid, page.objectId, fill);
@@ -506,8 +552,9 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   std::atomic<uint64_t> rays{0};
 
   // Stage 4: push-out.
+  std::vector<std::vector<uint8_t>> pushed;
   if (!pushOutStage(pages, texels, result.scene, result.layout, **tracer, showProgress, parallel,
-                    rays) ||
+                    rays, pushed) ||
       cancelled(cancel))
     return Error{"cancelled"};
 
@@ -545,7 +592,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());
   for (uint32_t p = 0; p < pages.size(); ++p) {
-    postPage(result.scene, result.layout, p, pages[p], texels, light, settings, withShadowmask,
+    postPage(result.scene, result.layout, p, pages[p], pushed[p], texels, light, settings,
+             withShadowmask,
              parallel, result.pages[p]);
     if (cancelled(cancel)) return Error{"cancelled"};
   }
@@ -556,7 +604,7 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   if (result.stats.invalidTexels > 0 && result.stats.invalidTexels * 10 > texels.size())
     result.warnings.push_back(std::to_string(result.stats.invalidTexels) + " of " +
                               std::to_string(texels.size()) +
-                              " texels are inside geometry (filled from neighbours)");
+                              " texels are inside geometry (see texel validity in docs/lightmap_outputs.md)");
   return result;
 }
 

@@ -11,7 +11,9 @@
 //      validity from the share of back-face hits; optional ambient occlusion; what each
 //      light contributes follows the lighting mode (src/light_modes.h); optionally the
 //      dominant direction (lightmap/directional.h) and the mixed lights' shadowmask;
-//   6. post: invalid texels filled, denoised, dilated into padding, seams stitched
+//   6. post: invalid texels that bilinear lookups at visible points can reach filled from
+//      valid neighbours (deeper ones keep their physical value, 0 when enclosed), denoised,
+//      dilated into padding, seams stitched
 //      (postprocess.h, seams.h).
 // Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
 #pragma once
@@ -44,7 +46,10 @@ struct LightmapBakeSettings {
   int supersampling = 1;      // n x n sample points per texel
   uint64_t seed = 0;
   // Light transport (see IntegratorSettings).
-  int bounces = 3;
+  // Bounce cap. Russian roulette (IntegratorSettings) ends most paths long before it, so a
+  // high cap costs little (Cornell box: +11% rays over 3 bounces) and closed rooms keep the
+  // light of late bounces (3 bounces: 5.7% dark against a 64-bounce reference).
+  int bounces = 64;
   float albedoBoost = 1.0f;
   float indirectIntensity = 1.0f;
   // Validity: a texel whose rays see back faces more often than this is inside geometry.

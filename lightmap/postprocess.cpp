@@ -197,7 +197,41 @@ std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid
   assert(objectId.empty() || objectId.size() == valid.size());
   const std::vector<int32_t> oneObject =
       objectId.empty() ? std::vector<int32_t>(valid.size(), 0) : std::vector<int32_t>();
-  const std::vector<int32_t>& ids = objectId.empty() ? oneObject : objectId;
+  const std::vector<int32_t>& given = objectId.empty() ? oneObject : objectId;
+  // With maxRings, the texels beyond reach drop out of the fill: object id -1 (like padding)
+  // in `limited`, so neither pass writes or reads them; they are added to the mask at the end.
+  std::vector<int32_t> limited;
+  std::vector<uint8_t> kept;
+  if (settings.maxRings > 0) {
+    std::vector<uint8_t> reach = valid, next;
+    if (settings.ringSeeds) {
+      assert(settings.ringSeeds->size() == valid.size());
+      for (size_t i = 0; i < reach.size(); ++i) reach[i] &= (*settings.ringSeeds)[i];
+    }
+    for (int ring = 0; ring < settings.maxRings; ++ring) {
+      next = reach;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const size_t i = size_t(y) * w + x;
+          if (reach[i] || given[i] < 0) continue;
+          for (int k = 0; k < 8 && !next[i]; ++k) {
+            const int nx = x + kDx[k], ny = y + kDy[k];
+            if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+            const size_t j = size_t(ny) * w + nx;
+            if (reach[j] && given[j] == given[i]) next[i] = 1;
+          }
+        }
+      reach.swap(next);
+    }
+    limited = given;
+    kept.assign(valid.size(), 0);
+    for (size_t i = 0; i < valid.size(); ++i)
+      if (given[i] >= 0 && !valid[i] && !reach[i]) {
+        limited[i] = -1;
+        kept[i] = 1;
+      }
+  }
+  const std::vector<int32_t>& ids = settings.maxRings > 0 ? limited : given;
   const int r = std::max(0, int(std::floor(settings.radius)));
   const float r2 = settings.radius * settings.radius;
 
@@ -238,6 +272,7 @@ std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid
   // Fallback: same-object rings for texels farther than `radius` from any valid texel.
   std::vector<uint8_t> next;
   while (dilateRing(image, mask, next, &ids, settings.parallel) > 0) mask.swap(next);
+  for (size_t i = 0; i < kept.size(); ++i) mask[i] |= kept[i];
   return mask;
 }
 

@@ -50,6 +50,19 @@ std::vector<uint8_t> dilate(Image& image, const std::vector<uint8_t>& valid, int
 
 struct FillSettings {
   float radius = 3.0f;  // texels: valid texels at Euclidean texel distance <= radius are used
+  // How far the fill reaches, in rings (8-neighbour steps within the object) from the
+  // object's valid texels. <= 0: every invalid texel that can be reached is filled. k > 0:
+  // only invalid texels within k rings are filled; the deeper ones keep the value they hold
+  // (the baker's physical estimate, ~0 for a texel enclosed by geometry) and count as set
+  // in the returned mask, so dilation leaves them alone. A bilinear lookup at a visible
+  // surface point reads texels at most one ring from a valid one: k = 1 is what rendering
+  // needs (lightmap_baker.cpp).
+  int maxRings = 0;
+  // With maxRings > 0: the texels rings are counted from (W x H, each also valid); null =
+  // every valid texel. The baker passes the valid texels whose centre lies on the visible
+  // surface, not the ones push-out moved out of a solid: a texel beyond those is more than a
+  // texel from any visible point, out of reach of bilinear lookups.
+  const std::vector<uint8_t>* ringSeeds = nullptr;
   ParallelOptions parallel;
 };
 
@@ -58,9 +71,12 @@ struct FillSettings {
 // weighted average (Shepard interpolation, weight 1 / d^2 with d in texels) of the valid
 // texels of the same object within `radius`. Texels with none in reach are then filled ring
 // by ring from their filled or valid same-object 8-neighbours (dilation restricted to the
-// object) until none is left that can be reached. Padding (objectId < 0) is left for dilate.
-// `objectId` empty = all texels belong to one object. Returns the mask afterwards
-// (`valid` | filled). Weights use valid texels only, so the result is order-independent.
+// object) until none is left that can be reached. With settings.maxRings > 0 only texels
+// within that many rings of a valid texel (or of a ringSeeds texel) of their object are
+// filled (and only from texels within those rings); deeper ones keep their values. Padding (objectId < 0) is left for
+// dilate. `objectId` empty = all texels belong to one object. Returns the mask afterwards
+// (`valid` | filled | kept). Weights use valid texels only, so the result is
+// order-independent.
 std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid,
                                  const std::vector<int32_t>& objectId,
                                  const FillSettings& settings = {});

@@ -1085,6 +1085,8 @@ class Loader {
     s.aoAmount = e.number("aoAmount", 0.0, 1e3, ">= 0");
     // Preset names belong to the tools that apply them; here only the type is checked.
     s.quality = e.string("quality");
+    if (const Json* c = e.find("shadowColor"))
+      s.shadowColor = readVec3(this, *c, e.where("shadowColor"), true);
     if (const Json* sky = e.find("sky")) convertSky(*sky, e.where("sky"));
     e.warnUnknown(this);
   }

@@ -131,6 +131,7 @@ struct SceneSettings {
   std::optional<float> aoMaxDistance;
   std::optional<float> aoAmount;
   std::optional<std::string> quality;  // preset name
+  std::optional<vec3> shadowColor;     // Subtractive's realtime shadow colour (E / pi units)
 };
 
 struct Scene {

@@ -735,6 +735,35 @@ TEST(BakeCommand, SceneLightingModeAndDefaultShadowColor) {
   fs::remove_all(dir);
 }
 
+// The scene's extras.kiln.shadowColor sets the shadow colour; --shadow-color wins over it; a
+// negative component in the scene is bad input naming the element.
+TEST(BakeCommand, SceneShadowColorAndCommandLineWins) {
+  const std::string dir = test::makeTempDir("bake_mixed");
+  const std::string scene = writeMixedScene(dir, "subtractive");
+  Json doc = readJson(scene);
+  doc["scenes"][0]["extras"]["kiln"]["shadowColor"] = {0.2, 0.3, 0.4};
+  test::writeTextFile(scene, doc.dump());
+  const std::string common = " --resolution 4 --samples 4 --bounces 0 -q";
+  std::string out;
+  ASSERT_EQ(kiln("bake " + scene + " --out " + dir + "/a" + common, &out), 0) << out;
+  const Json a = readJson(dir + "/a/manifest.json");
+  EXPECT_EQ(a["settings"]["shadowColor"][0].get<float>(), 0.2f);
+  EXPECT_EQ(a["settings"]["shadowColor"][1].get<float>(), 0.3f);
+  EXPECT_EQ(a["settings"]["shadowColor"][2].get<float>(), 0.4f);
+  ASSERT_EQ(kiln("bake " + scene + " --out " + dir + "/b --shadow-color 0.5,0.5,0.5" + common,
+                 &out),
+            0)
+      << out;
+  const Json b = readJson(dir + "/b/manifest.json");
+  for (size_t c = 0; c < 3; ++c) EXPECT_EQ(b["settings"]["shadowColor"][c].get<float>(), 0.5f);
+  doc["scenes"][0]["extras"]["kiln"]["shadowColor"] = {0.2, -0.3, 0.4};
+  test::writeTextFile(scene, doc.dump());
+  EXPECT_EQ(kiln("bake " + scene + " --out " + dir + "/c" + common, &out), 1);
+  EXPECT_NE(out.find("scenes[0].extras.kiln.shadowColor"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir + "/c/manifest.json"));
+  fs::remove_all(dir);
+}
+
 TEST(BakeCommand, BadShadowColorIsBadUsage) {
   const std::string dir = test::makeTempDir("bake_mixed");
   const std::string scene = writeMixedScene(dir, "");

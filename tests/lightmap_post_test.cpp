@@ -131,6 +131,66 @@ TEST(LightmapFill, ShepardWeightsWithinObjectThenRings) {
   for (int x = 5; x < 8; ++x) EXPECT_EQ(row.pixels[size_t(x)], 0.0f);
 }
 
+TEST(LightmapFill, MaxRingsFillsNearValidTexelsAndKeepsDeeperOnes) {
+  // Row: [1, X, D, X, 4, pad] with maxRings 1: the X texels touch a valid texel and are
+  // filled (Shepard, radius 3: X1 sees 1 at d = 1 and 4 at d = 3 -> (1 + 4/9) / (1 + 1/9) =
+  // 1.3; X3 -> (1/9 + 4) / (10/9) = 3.7); D is two rings from both and keeps its 0.25 (the
+  // baker's physical estimate); all three count as set; padding stays empty.
+  Image image(6, 1, 1);
+  image.pixels = {1.0f, 0.0f, 0.25f, 0.0f, 4.0f, 0.0f};
+  const std::vector<uint8_t> valid = {1, 0, 0, 0, 1, 0};
+  const std::vector<int32_t> ids = {0, 0, 0, 0, 0, -1};
+  FillSettings settings;
+  settings.radius = 3.0f;
+  settings.maxRings = 1;
+  const std::vector<uint8_t> mask = fillInvalid(image, valid, ids, settings);
+  EXPECT_FLOAT_EQ(image.pixels[1], 1.3f);
+  EXPECT_EQ(image.pixels[2], 0.25f);
+  EXPECT_FLOAT_EQ(image.pixels[3], 3.7f);
+  EXPECT_EQ(image.pixels[5], 0.0f);
+  EXPECT_EQ(mask, (std::vector<uint8_t>{1, 1, 1, 1, 1, 0}));
+
+  // Rings beyond the Shepard radius, limited to two: texels 1 and 2 take 2.5 ring by ring;
+  // 3 and 4 are deeper, keep their 7 and are never read; object 4 has no valid texel at all
+  // (enclosed as a whole): it keeps its 9 and counts as set.
+  Image row(7, 1, 1);
+  row.pixels = {2.5f, 0.0f, 0.0f, 7.0f, 7.0f, 0.0f, 9.0f};
+  const std::vector<uint8_t> v2 = {1, 0, 0, 0, 0, 0, 0};
+  const std::vector<int32_t> id2 = {3, 3, 3, 3, 3, -1, 4};
+  settings.radius = 0.5f;
+  settings.maxRings = 2;
+  const std::vector<uint8_t> m2 = fillInvalid(row, v2, id2, settings);
+  EXPECT_EQ(m2, (std::vector<uint8_t>{1, 1, 1, 1, 1, 0, 1}));
+  EXPECT_EQ(row.pixels, (std::vector<float>{2.5f, 2.5f, 2.5f, 7.0f, 7.0f, 0.0f, 9.0f}));
+
+  // A 2D block: ring distance is the 8-neighbour (Chebyshev) distance, so the diagonal
+  // neighbour of the valid corner is ring 1.
+  Image grid(3, 3, 1);
+  std::vector<uint8_t> v3(9, 0);
+  v3[0] = 1;
+  grid.pixels = {1.0f, 0, 0, 0, 0, 0, 0, 0, 0.5f};
+  settings.radius = 1.5f;
+  settings.maxRings = 1;
+  const std::vector<uint8_t> m3 = fillInvalid(grid, v3, {}, settings);
+  EXPECT_EQ(m3, std::vector<uint8_t>(9, 1));
+  EXPECT_EQ(grid.pixels, (std::vector<float>{1, 1, 0, 1, 1, 0, 0, 0, 0.5f}));
+
+  // Ring seeds: [S, P, X, X] with S a seed (valid, visible centre) and P valid but not a
+  // seed (a centre push-out moved): X2 is two rings from S, X3 three: both keep their
+  // values; P is never changed. With P a seed too, X2 is filled from P (radius 1.5).
+  Image seeded(4, 1, 1);
+  seeded.pixels = {1.0f, 2.0f, 0.0f, 0.0f};
+  const std::vector<uint8_t> v4 = {1, 1, 0, 0};
+  std::vector<uint8_t> seeds = {1, 0, 0, 0};
+  settings.ringSeeds = &seeds;
+  Image copy = seeded;
+  EXPECT_EQ(fillInvalid(copy, v4, {}, settings), std::vector<uint8_t>(4, 1));
+  EXPECT_EQ(copy.pixels, seeded.pixels);
+  seeds[1] = 1;
+  EXPECT_EQ(fillInvalid(seeded, v4, {}, settings), std::vector<uint8_t>(4, 1));
+  EXPECT_EQ(seeded.pixels, (std::vector<float>{1.0f, 2.0f, 2.0f, 0.0f}));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Denoiser
 

@@ -118,6 +118,7 @@ int applySceneSettings(const Scene& scene, LightmapBakeSettings& b) {
   if (s.ambientOcclusion) b.ambientOcclusion = *s.ambientOcclusion;
   if (s.aoMaxDistance) b.aoMaxDistance = *s.aoMaxDistance;
   if (s.aoAmount) b.aoAmount = *s.aoAmount;
+  if (s.shadowColor) b.shadowColor = *s.shadowColor;
   return kExitOk;
 }
 
@@ -299,7 +300,7 @@ void registerBakeCommand(CLI::App& app) {
       ->check(CLI::Range(1, 16384));
   b->add_option("--padding", o->padding, "Empty texels around every object (default 2)")
       ->check(CLI::Range(0, 256));
-  b->add_option("--bounces", o->bounces, "Indirect bounces (default 3)")
+  b->add_option("--bounces", o->bounces, "Bounce cap (default 64; Russian roulette)")
       ->check(CLI::Range(0, 1024));
   b->add_option("--seed", o->seed, "Seed of every random number (default 0)");
   b->add_option("--threads", o->threads, "Worker threads (0 = all cores; output is the same)")

@@ -28,18 +28,29 @@ Result<Json> readJson(const std::string& path) {
   }
 }
 
-// Bilinear sample of an image at texture coordinate (u, v), texel centres at (i + 0.5) / size,
-// clamped at the borders.
-vec3 sampleBilinear(const Image& image, float u, float v) {
-  const float px = u * float(image.width) - 0.5f, py = v * float(image.height) - 0.5f;
-  const float fx0 = std::floor(px), fy0 = std::floor(py);
-  const float fx = px - fx0, fy = py - fy0;
-  auto clampX = [&](float x) { return std::clamp(int(x), 0, image.width - 1); };
-  auto clampY = [&](float y) { return std::clamp(int(y), 0, image.height - 1); };
-  const int x0 = clampX(fx0), x1 = clampX(fx0 + 1), y0 = clampY(fy0), y1 = clampY(fy0 + 1);
-  const vec3 top = image.rgb(x0, y0) * (1.0f - fx) + image.rgb(x1, y0) * fx;
-  const vec3 bottom = image.rgb(x0, y1) * (1.0f - fx) + image.rgb(x1, y1) * fx;
-  return top * (1.0f - fy) + bottom * fy;
+// The mean of kiln's texels over one reference texel's footprint, the UV square
+// [x, x + 1] / W x [y, y + 1] / H mapped through scaleOffset: kFootprintSamples^2 lookups of
+// the nearest kiln texel on a regular grid, i.e. kiln's texels weighted by their overlap with
+// the footprint. A kiln texel holds the mean E/pi over its own (smaller) footprint, and a
+// reference texel the mean over its footprint (Cycles jitters its samples over the texel,
+// README), so both sides are then the same quantity. kiln's value at the footprint's centre
+// would count the difference between a box filter and a point sample as error, which where
+// the footprint is partly hidden (a block's foot, the ceiling around the lamp) or crosses a
+// shadow edge is a large part of the value. The reference compared with itself stays exact.
+constexpr int kFootprintSamples = 8;
+
+vec3 sampleFootprint(const Image& atlas, int x, int y, int w, int h, vec2 scale, vec2 offset) {
+  glm::dvec3 sum(0.0);
+  for (int j = 0; j < kFootprintSamples; ++j)
+    for (int i = 0; i < kFootprintSamples; ++i) {
+      const vec2 uv((float(x) + (float(i) + 0.5f) / kFootprintSamples) / float(w),
+                    (float(y) + (float(j) + 0.5f) / kFootprintSamples) / float(h));
+      const vec2 a = uv * scale + offset;
+      const int ax = std::clamp(int(std::floor(a.x * float(atlas.width))), 0, atlas.width - 1);
+      const int ay = std::clamp(int(std::floor(a.y * float(atlas.height))), 0, atlas.height - 1);
+      sum += glm::dvec3(atlas.rgb(ax, ay));
+    }
+  return vec3(sum / double(kFootprintSamples * kFootprintSamples));
 }
 
 }  // namespace
@@ -135,9 +146,7 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
         for (int dy = -1; dy <= 1 && inside; ++dy)
           for (int dx = -1; dx <= 1 && inside; ++dx) inside = covered(x + dx, y + dy);
         if (!inside) continue;
-        const vec2 uv((float(x) + 0.5f) / float(w), (float(y) + 0.5f) / float(h));
-        const vec2 a = uv * scale + offset;
-        const vec3 k = sampleBilinear(atlas, a.x, a.y), r = refImage->rgb(x, y);
+        const vec3 k = sampleFootprint(atlas, x, y, w, h, scale, offset), r = refImage->rgb(x, y);
         bool hiddenNeighbour = false;
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {

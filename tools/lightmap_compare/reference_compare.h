@@ -3,18 +3,22 @@
 // square, with a coverage mask; see that folder's README.md).
 //
 // For every reference texel (x, y) whose 3 x 3 neighbourhood is inside the mask (texels next
-// to UV edges hold Cycles' margin fill and are unreliable), its UV1 is ((x + 0.5) / W,
-// (y + 0.5) / H) (glTF orientation, row 0 = v 0); the object's scaleOffset from kiln's
-// manifest maps it into its atlas page, which is sampled bilinearly (texel centres at
-// (i + 0.5) / size). Accumulated per object and overall, over R, G and B:
+// to UV edges hold Cycles' margin fill and are unreliable), its UV1 footprint
+// [x, x + 1] / W x [y, y + 1] / H (glTF orientation, row 0 = v 0) is mapped through the
+// object's scaleOffset from kiln's manifest into its atlas page, and kiln's texels are
+// averaged over it (8 x 8 lookups of the nearest texel: each kiln texel weighted by its
+// overlap). A reference texel is the mean of E/pi over its footprint (README), and so is
+// this; kiln's value at the footprint's centre would not be, wherever light changes within
+// it (shadow edges, the foot of a block, the ceiling around the lamp). Accumulated per
+// object and overall, over R, G and B:
 //   relative RMSE = sqrt(sum (k - r)^2 / sum r^2),   mean ratio = sum k / sum r.
-// A second set of sums, "visible", also leaves out texels with a hidden neighbour: a texel whose
-// 3 x 3 neighbourhood holds a reference texel with R + G + B < kHiddenReference, i.e. a surface
-// point no light reaches: inside a closed solid (the floor under the Cornell box's blocks, the
-// ceiling behind the light). Cycles bakes those black; kiln marks them invalid and fills them
-// from valid neighbours (MISSION.md "Texels"), as no camera can see them. Lit texels in the
-// scene are 2 to 3 orders of magnitude above the threshold (the visible results are the same
-// with 1e-2).
+// A second set of sums, "visible", also leaves out texels with a hidden neighbour: a texel
+// whose 3 x 3 neighbourhood holds a reference texel with R + G + B < kHiddenReference, i.e.
+// a surface point no light reaches: inside a closed solid (the floor under the Cornell box's
+// blocks, the ceiling behind the light). Cycles bakes those black, and so does kiln except
+// for the invalid texels next to valid ones, which it fills from them so that bilinear
+// lookups at visible points read lit values (docs/lightmap_outputs.md). Lit texels in the
+// scene are 2 to 3 orders of magnitude above the threshold.
 // Used by the kiln_compare_reference tool and by tests/lightmap_reference_test.cpp.
 #pragma once
 
