@@ -3,6 +3,7 @@
 #include "probes/probe_placement.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -463,6 +464,48 @@ std::vector<ivec3> octreeCorners(const Scene& scene, const Tracer& tracer,
 
 }  // namespace
 
+float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
+                          const std::array<const ShL2Rgb*, 4>& sh, float floor) {
+  bool blocked = false;
+  for (int a = 0; a < 4 && !blocked; ++a)
+    for (int b = a + 1; b < 4 && !blocked; ++b)
+      blocked = tracer.occluded(Ray{p[size_t(a)], p[size_t(b)] - p[size_t(a)], 1e-4f,
+                                    1.0f - 1e-4f});
+  if (!blocked) return 0.0f;
+  const float volume =
+      std::abs(glm::dot(p[1] - p[0], glm::cross(p[2] - p[0], p[3] - p[0]))) / 6.0f;
+  // Centroid, four points towards the vertices, six towards the edges' midpoints.
+  std::vector<vec4> pattern = {vec4(0.25f)};
+  for (int v = 0; v < 4; ++v) {
+    vec4 w(0.1f);
+    w[v] = 0.7f;
+    pattern.push_back(w);
+  }
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) {
+      vec4 w(0.1f);
+      w[a] = w[b] = 0.4f;
+      pattern.push_back(w);
+    }
+  double sum = 0.0;
+  for (const vec4& w : pattern) {
+    const vec3 x = w[0] * p[0] + w[1] * p[1] + w[2] * p[2] + w[3] * p[3];
+    ShL2Rgb blend, seen;
+    float seenWeight = 0.0f;
+    for (size_t v = 0; v < 4; ++v) {
+      blend += *sh[v] * w[int(v)];
+      if (!tracer.occluded(Ray{x, p[v] - x, 1e-4f, 1.0f - 1e-4f})) {
+        seen += *sh[v] * w[int(v)];
+        seenWeight += w[int(v)];
+      }
+    }
+    // Inside geometry (sees no probe) or unaffected (sees all): no leak at this point.
+    if (seenWeight <= 0.0f || seenWeight >= 0.999f) continue;
+    sum += relativeIrradianceError(seen * (1.0f / seenWeight), blend, floor);
+  }
+  return float(double(volume) * sum / double(pattern.size()));
+}
+
 std::vector<vec3> ProbePlacement::positions() const {
   std::vector<vec3> out;
   out.reserve(probes.size());
@@ -560,19 +603,77 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
   const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
 
-  // 3. Refinement over index sets into `candidates`.
+  // 3. Refinement over index sets into `candidates`. A set's score is its mean check error
+  // plus its leak estimate (cellLeakVolumeError summed over the inner cells, divided by the
+  // volumes' total): the expected error the check points miss in cells that span walls.
   std::string topologyError;
-  auto evaluate = [&](const std::vector<uint32_t>& sel) -> std::optional<FieldError> {
+  struct Scored {
+    FieldError field;
+    float leak = 0.0f;
+    float score = 0.0f;
+  };
+  std::map<std::array<uint32_t, 4>, float> leakCache;  // by sorted candidate indices
+  auto leakOf = [&](const ProbeSet& set, const std::vector<uint32_t>& sel) -> float {
+    if (set.dimension != 3) return 0.0f;
+    std::vector<std::array<uint32_t, 4>> keys(size_t(set.innerCellCount));
+    std::vector<std::array<uint32_t, 4>> missing;
+    for (int32_t c = 0; c < set.innerCellCount; ++c) {
+      const glm::ivec4 cell = set.cells[size_t(c)];
+      std::array<uint32_t, 4> key;
+      for (int v = 0; v < 4; ++v) key[size_t(v)] = sel[size_t(cell[v])];
+      std::sort(key.begin(), key.end());
+      keys[size_t(c)] = key;
+      if (!leakCache.count(key)) missing.push_back(key);
+    }
+    std::sort(missing.begin(), missing.end());
+    missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+    std::vector<float> computed(missing.size(), 0.0f);
+    ParallelOptions options;
+    options.threads = settings.threads;
+    options.grain = 16;
+    parallelFor(
+        missing.size(),
+        [&](size_t begin, size_t end) {
+          for (size_t m = begin; m < end; ++m) {
+            std::array<vec3, 4> p;
+            std::array<const ShL2Rgb*, 4> sh;
+            for (size_t v = 0; v < 4; ++v) {
+              p[v] = candidates[missing[m][v]].position;
+              sh[v] = &candidateSh[missing[m][v]];
+            }
+            computed[m] = cellLeakVolumeError(tracer, p, sh, floor);
+          }
+        },
+        options);
+    for (size_t m = 0; m < missing.size(); ++m) leakCache[missing[m]] = computed[m];
+    double leak = 0.0;
+    for (const auto& key : keys) leak += leakCache[key];
+    return float(leak / double(totalVolume));
+  };
+  auto topology = [&](const std::vector<uint32_t>& sel) -> Result<ProbeSet> {
     std::vector<vec3> pos;
     pos.reserve(sel.size());
     for (uint32_t i : sel) pos.push_back(candidates[i].position);
-    Result<ProbeSet> set = buildProbeTopology(pos, ProbeTopologySettings{});
+    return buildProbeTopology(pos, ProbeTopologySettings{});
+  };
+  auto evaluate = [&](const std::vector<uint32_t>& sel) -> std::optional<Scored> {
+    Result<ProbeSet> set = topology(sel);
     if (!set) {
       topologyError = set.error();
       return std::nullopt;
     }
     for (size_t k = 0; k < sel.size(); ++k) set->sh[k] = candidateSh[sel[k]];
-    return measureFieldError(*set, checks, truth, floor, settings.threads);
+    Scored out;
+    out.field = measureFieldError(*set, checks, truth, floor, settings.threads);
+    if (settings.leakWeight > 0.0f) out.leak = leakOf(*set, sel);
+    out.score = out.field.mean + settings.leakWeight * out.leak;
+    return out;
+  };
+  // The leak a pick brings: the set's leak with it minus without it (0 when leaks are off).
+  auto leakOfSelection = [&](const std::vector<uint32_t>& sel) -> std::optional<float> {
+    Result<ProbeSet> set = topology(sel);
+    if (!set) return std::nullopt;
+    return leakOf(*set, sel);
   };
 
   // Start: the candidates nearest the cells' centres of a coarse lattice of about `initial`
@@ -580,54 +681,77 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   // start from the volumes' corners, all of them against walls.
   std::vector<uint32_t> snapshotsLeft = settings.snapshotCounts;
   std::sort(snapshotsLeft.begin(), snapshotsLeft.end());
+  std::vector<uint32_t> snapshotRequested;  // the count each recorded snapshot stands for
   uint32_t initial = std::max(8u, settings.budget / 10u);
   if (!snapshotsLeft.empty()) initial = std::min(initial, std::max(4u, snapshotsLeft.front()));
   initial = std::min({initial, settings.budget, uint32_t(candidates.size())});
   std::vector<uint32_t> selected;
   std::vector<uint8_t> inSet(candidates.size(), 0), rejected(candidates.size(), 0);
-  for (float h = std::cbrt(totalVolume / float(initial)); selected.size() < 4; h *= 0.8f) {
-    selected.clear();
-    std::fill(inSet.begin(), inSet.end(), 0);
-    for (const Bounds3& b : volumes) {
-      const vec3 e = b.extent();
-      ivec3 n;
-      for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
-      // Cell centres only: seeding the volume's corners as well covers more of the volume
-      // with the start hull (better in the open courtyard) but, in a closed building whose
-      // bounds include the thin shell outside its walls, starts from sunlit probes outside
-      // that leak into the rooms (measured: docs/probe_placement.md).
-      std::vector<vec3> targets;
-      for (int z = 0; z < n.z; ++z)
-        for (int y = 0; y < n.y; ++y)
-          for (int x = 0; x < n.x; ++x)
-            targets.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
-      for (const vec3& c : targets) {
-        if (selected.size() >= settings.budget) break;
-        uint32_t nearest = 0;
-        float nearestDistance = kInfinity;
-        for (uint32_t i = 0; i < candidates.size(); ++i) {
-          const float d = glm::length(candidates[i].position - c);
-          if (d < nearestDistance) nearestDistance = d, nearest = i;
-        }
-        if (!inSet[nearest]) {
-          inSet[nearest] = 1;
-          selected.push_back(nearest);
+  // Two start sets, the lattice's cell centres alone and with each volume's eight corners as
+  // well; the one with the lower score is kept. The corners put the whole open volume inside
+  // the start hull (the courtyard: no extrapolated regions), but in a closed building whose
+  // bounds include a thin shell outside its walls they are sunlit probes that leak into the
+  // rooms, which the leak estimate sees.
+  auto startSet = [&](bool withCorners) {
+    std::vector<uint32_t> sel;
+    std::vector<uint8_t> in(candidates.size(), 0);
+    for (float h = std::cbrt(totalVolume / float(initial)); sel.size() < 4; h *= 0.8f) {
+      sel.clear();
+      std::fill(in.begin(), in.end(), 0);
+      for (const Bounds3& b : volumes) {
+        const vec3 e = b.extent();
+        ivec3 n;
+        for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
+        std::vector<vec3> targets;
+        for (int z = 0; z < n.z; ++z)
+          for (int y = 0; y < n.y; ++y)
+            for (int x = 0; x < n.x; ++x)
+              targets.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
+        if (withCorners)
+          for (int k = 0; k < 8; ++k)
+            targets.push_back(b.min + e * vec3(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+        for (const vec3& c : targets) {
+          if (sel.size() >= settings.budget) break;
+          uint32_t nearest = 0;
+          float nearestDistance = kInfinity;
+          for (uint32_t i = 0; i < candidates.size(); ++i) {
+            const float d = glm::length(candidates[i].position - c);
+            if (d < nearestDistance) nearestDistance = d, nearest = i;
+          }
+          if (!in[nearest]) {
+            in[nearest] = 1;
+            sel.push_back(nearest);
+          }
         }
       }
+      if (h < 1e-3f) break;
     }
-    if (h < 1e-3f) break;
+    return sel;
+  };
+  std::optional<Scored> current;
+  for (bool withCorners : {false, true}) {
+    std::vector<uint32_t> sel = startSet(withCorners);
+    if (sel.size() < 4 || sel == selected) continue;
+    std::optional<Scored> e = evaluate(sel);
+    if (e && (!current || e->score < current->score)) {
+      current = std::move(e);
+      selected = std::move(sel);
+    }
   }
   if (selected.size() < 4) return Error{"placement: fewer than 4 distinct start probes"};
-  std::optional<FieldError> current = evaluate(selected);
   if (!current) return Error{"placement: " + topologyError};
-  result.initialError = current->mean;
-  result.errorHistory.push_back(current->mean);
+  for (uint32_t i : selected) inSet[i] = 1;
+  // Every set the run accepted, by score: the snapshots are the best of at most N probes.
+  std::vector<std::pair<float, std::vector<uint32_t>>> accepted = {{current->score, selected}};
+  result.initialError = current->score;
+  result.errorHistory.push_back(current->score);
   auto takeSnapshots = [&] {
     while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
       std::vector<vec3> pos;
       for (uint32_t i : selected) pos.push_back(candidates[i].position);
       result.snapshots.push_back(std::move(pos));
       result.snapshotCounts.push_back(uint32_t(selected.size()));
+      snapshotRequested.push_back(snapshotsLeft.front());
       snapshotsLeft.erase(snapshotsLeft.begin());
     }
   };
@@ -659,9 +783,9 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   // around it, and the walls between a few probes need several on each side); the best set
   // seen is kept, so the result never has a higher check error than the start.
   std::vector<uint32_t> bestSelected = selected;
-  FieldError best = *current;
+  Scored best = *current;
   auto grow = [&]() {
-    while (selected.size() < settings.budget && best.mean > settings.targetError &&
+    while (selected.size() < settings.budget && best.score > settings.targetError &&
            !isCancelled()) {
       uint32_t batch = std::max(1u, uint32_t(std::lround(settings.batchFraction *
                                                           float(selected.size()))));
@@ -671,12 +795,12 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       std::vector<uint32_t> order(checks.size());
       std::iota(order.begin(), order.end(), 0u);
       std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-        return current->perPoint[a] > current->perPoint[b];
+        return current->field.perPoint[a] > current->field.perPoint[b];
       });
       std::vector<uint32_t> picks;
       std::vector<vec3> pickPositions, spawned;
       for (uint32_t j : order) {
-        if (picks.size() >= batch || current->perPoint[j] <= 0.0f) break;
+        if (picks.size() >= batch || current->field.perPoint[j] <= 0.0f) break;
         bool covered = false;
         for (const vec3& q : pickPositions)
           covered = covered || glm::length(q - checks[j]) < exclusion;
@@ -711,9 +835,35 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
         }
         result.spawned += uint32_t(spawned.size());
       }
+      // Leak-aware acceptance: a pick whose own leak (the set's leak with all picks minus
+      // without it) exceeds the mean error share of one probe is dropped. It would bridge a
+      // wall between differently lit sides (e.g. a sunlit probe outside a building joined to
+      // probes in a dark room) for a gain the check points overrate.
+      if (settings.leakWeight > 0.0f && picks.size() > 0) {
+        std::vector<uint32_t> all = selected;
+        all.insert(all.end(), picks.begin(), picks.end());
+        const std::optional<float> with = leakOfSelection(all);
+        const float share = best.score / float(selected.size());
+        std::vector<uint32_t> kept;
+        for (size_t k = 0; with && k < picks.size(); ++k) {
+          std::vector<uint32_t> without = selected;
+          for (size_t m = 0; m < picks.size(); ++m)
+            if (m != k) without.push_back(picks[m]);
+          const std::optional<float> w = leakOfSelection(without);
+          if (w && settings.leakWeight * (*with - *w) > share)
+            rejected[picks[k]] = 1;
+          else
+            kept.push_back(picks[k]);
+        }
+        if (with) {
+          result.leakRejected += uint32_t(picks.size() - kept.size());
+          picks = std::move(kept);
+          if (picks.empty()) continue;
+        }
+      }
       std::vector<uint32_t> trial = selected;
       trial.insert(trial.end(), picks.begin(), picks.end());
-      std::optional<FieldError> e = evaluate(trial);
+      std::optional<Scored> e = evaluate(trial);
       if (!e) {
         for (uint32_t c : picks) rejected[c] = 1;  // degenerate topology: try others
         continue;
@@ -721,11 +871,12 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       for (uint32_t c : picks) inSet[c] = 1;
       selected = std::move(trial);
       current = std::move(e);
+      accepted.push_back({current->score, selected});
       ++result.rounds;
-      if (current->mean <= best.mean) {
+      if (current->score <= best.score) {
         best = *current;
         bestSelected = selected;
-        result.errorHistory.push_back(best.mean);
+        result.errorHistory.push_back(best.score);
       }
       // Snapshot s: the best set of at most s probes.
       while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
@@ -733,7 +884,8 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
         for (uint32_t i : bestSelected) pos.push_back(candidates[i].position);
         result.snapshots.push_back(std::move(pos));
         result.snapshotCounts.push_back(uint32_t(bestSelected.size()));
-        snapshotsLeft.erase(snapshotsLeft.begin());
+        snapshotRequested.push_back(snapshotsLeft.front());
+      snapshotsLeft.erase(snapshotsLeft.begin());
       }
     }
     selected = bestSelected;
@@ -769,15 +921,16 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       std::vector<uint32_t> trial;
       for (uint32_t i : selected)
         if (i != victim) trial.push_back(i);
-      std::optional<FieldError> e = evaluate(trial);
-      if (e && e->mean <= current->mean) {
+      std::optional<Scored> e = evaluate(trial);
+      if (e && e->score <= current->score) {
         selected = std::move(trial);
         inSet[victim] = 0;
         rejected[victim] = 1;  // do not add it straight back
         current = std::move(e);
         best = *current;
         bestSelected = selected;
-        result.errorHistory.push_back(current->mean);
+        accepted.push_back({current->score, selected});
+        result.errorHistory.push_back(current->score);
         ++removed;
       }
     }
@@ -786,9 +939,24 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
     grow();
   }
   if (isCancelled()) return Error{"cancelled"};
+  // Snapshot s: the lowest-score set of at most s probes accepted at any point of the run
+  // (growth, pruning, regrowth).
+  for (size_t k = 0; k < result.snapshotCounts.size(); ++k) {
+    const uint32_t limit = snapshotRequested[k];
+    const std::vector<uint32_t>* bestSet = nullptr;
+    float bestScore = kInfinity;
+    for (const auto& [score, set] : accepted)
+      if (set.size() <= limit && score < bestScore) bestScore = score, bestSet = &set;
+    if (!bestSet) continue;
+    std::vector<vec3> pos;
+    for (uint32_t i : *bestSet) pos.push_back(candidates[i].position);
+    result.snapshots[k] = std::move(pos);
+    result.snapshotCounts[k] = uint32_t(bestSet->size());
+  }
 
-  result.estimatedError = current->mean;
-  result.estimatedError95 = current->p95;
+  result.estimatedError = current->score;
+  result.estimatedLeak = current->leak;
+  result.estimatedError95 = current->field.p95;
   std::sort(selected.begin(), selected.end());
   for (uint32_t i : selected) {
     const Candidate& c = candidates[i];

@@ -11,12 +11,16 @@
 //    that still fails after a few moves is dropped.
 // 3. Refinement: every candidate and a set of random check points are baked cheaply once
 //    (same rays and integrator, so SH truncation and bias cancel in the comparison); starting
-//    from a farthest-point subset, rounds add the candidates nearest (and visible from) the
-//    check points where the tetrahedral interpolation (Cupisz 2012) is worst, and a prune
-//    pass removes probes whose removal does not raise the error. A round that would raise
-//    the error is rejected, so the measured error never increases.
+//    from a coarse lattice snapped to candidates, rounds add the candidates nearest (and
+//    visible from) the check points where the tetrahedral interpolation (Cupisz 2012) is
+//    worst, and a prune pass removes probes whose removal does not raise the error. A set's
+//    score is its mean
+//    check error plus a leak estimate of its cells that span walls (cellLeakVolumeError);
+//    picks that would bring more leak than one probe's share are dropped, and the
+//    best-scoring set is kept, so the score never increases.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <optional>
@@ -95,7 +99,7 @@ Result<std::vector<vec3>> uniformGridPositions(const Scene& scene, const Tracer&
 struct ProbePlacementSettings {
   std::vector<Bounds3> volumes;  // empty = the bounds of the static objects
   uint32_t budget = 256;         // most probes placed (>= 4)
-  float targetError = 0.0f;      // stop when the mean relative check error is <= this (0: off)
+  float targetError = 0.0f;      // stop when the score (check mean + leak) is <= this (0: off)
   // Base octree spacing in metres; 0 = (volume / budget)^(1/3), so the coarse lattice alone
   // would hold about `budget` points.
   float spacing = 0.0f;
@@ -108,8 +112,12 @@ struct ProbePlacementSettings {
   // of its own (open air, where the octree is coarse); 0 = always a new probe, large = never.
   float candidateReach = 0.25f;
   bool prune = true;
-  // Probe sets recorded while growing (before pruning) when the count first reaches each of
-  // these: one run yields the error-versus-count curve.
+  // Weight of the leak estimate (error in cells that span walls, estimated from what points
+  // inside them can see) added to the mean check error to score a set; 0 = check points only.
+  float leakWeight = 1.0f;
+  // For each of these counts (once growth reaches it), the lowest-scoring set of at most
+  // that many probes accepted anywhere in the run (growth, pruning, regrowth): one run yields
+  // the error-versus-count curve. Growth batches stop at these counts.
   std::vector<uint32_t> snapshotCounts;
   uint64_t seed = 0;
   ProbeBakeSettings bake;  // integrator settings of the cheap bakes (rays are candidateRays)
@@ -128,18 +136,20 @@ struct PlacedProbe {
 struct ProbePlacement {
   std::vector<PlacedProbe> probes;
   std::vector<std::vector<vec3>> snapshots;  // one per reached snapshotCounts entry
-  std::vector<uint32_t> snapshotCounts;      // the counts actually recorded
+  std::vector<uint32_t> snapshotCounts;      // their probe counts (<= the requested ones)
   // Report.
   uint32_t candidates = 0;          // after validity
   uint32_t candidatesMoved = 0;     // relocated candidates
   uint32_t candidatesDropped = 0;   // invalid and not relocatable
   uint32_t checkPoints = 0;
   uint32_t spawned = 0;             // probes added at check points (no candidate near)
-  float initialError = 0.0f;        // mean relative error on the check points, first set
-  float estimatedError = 0.0f;      // ... final set
+  float initialError = 0.0f;        // score (mean check error + leak) of the first set
+  float estimatedError = 0.0f;      // ... final set (check mean + leakWeight x leak)
+  float estimatedLeak = 0.0f;       // leak estimate of the final set
   float estimatedError95 = 0.0f;    // 95th percentile, final set
   std::vector<float> errorHistory;  // mean check error after every accepted step
   uint32_t rounds = 0, pruned = 0;
+  uint32_t leakRejected = 0;  // picks dropped for the leak they would bring
   double seconds = 0.0;
   std::vector<vec3> positions() const;
 };
@@ -176,6 +186,18 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
                                  std::span<const vec3> points, const ProbeBakeSettings& settings,
                                  Progress* progress = nullptr,
                                  const std::atomic<bool>* cancel = nullptr);
+
+// Leak estimate of one tetrahedron (corners p, baked SH sh): the error its blending makes at
+// points that cannot see all four of its probes (a wall runs through it), times its volume. At
+// 11 fixed points inside the cell (centroid, towards each corner, towards each edge), the
+// probes visible from the point stand in for the truth there (their weights renormalized) and
+// the blend of all four is what the runtime returns; the mean relativeIrradianceError between
+// the two, times the cell's volume (m^3). Zero for cells with no edge blocked by geometry, and
+// when the four probes agree. Check points find such errors only where they happen to fall; a
+// sliver that reaches from a sunlit probe into a dark room holds few of them but can dominate
+// the mean error. Placement adds the sum over inner cells / the volumes' total to its score.
+float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
+                          const std::array<const ShL2Rgb*, 4>& sh, float floor);
 
 // Leak exposure of a topology: inner cells with at least one edge blocked by geometry (an
 // opaque or translucent surface between two of its probes), which can blend light through it.

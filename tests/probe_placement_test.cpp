@@ -219,6 +219,32 @@ TEST(ProbePlacement, CellsCrossingAWallAreCounted) {
   EXPECT_EQ(countCellsCrossingGeometry(*t.tracer, *set).crossingCells, 1u);
 }
 
+TEST(ProbePlacement, LeakEstimateSeesOnlyCellsSpanningAWallWithDifferentLight) {
+  const Traced t = traced(twoCells());
+  ShL2Rgb bright, dark;
+  bright.c[0] = vec3(2.0f);
+  dark.c[0] = vec3(0.01f);
+  const float floor = 0.05f;
+  // All in the left room: no blocked edge, no leak whatever the light.
+  const std::array<vec3, 4> left = {vec3(0.3f, 1.0f, 0.3f), vec3(1.7f, 1.0f, 0.3f),
+                                    vec3(1.0f, 1.0f, 1.7f), vec3(1.0f, 1.8f, 1.0f)};
+  EXPECT_EQ(cellLeakVolumeError(*t.tracer, left, {&bright, &dark, &dark, &bright}, floor), 0.0f);
+  // Spanning the wall: a leak when the sides differ, none when all four probes agree.
+  const std::array<vec3, 4> span = {vec3(1.5f, 1.0f, 0.3f), vec3(2.7f, 1.0f, 0.3f),
+                                    vec3(1.5f, 1.0f, 1.7f), vec3(1.5f, 1.8f, 1.0f)};
+  EXPECT_EQ(cellLeakVolumeError(*t.tracer, span, {&bright, &bright, &bright, &bright}, floor),
+            0.0f);
+  const float leak =
+      cellLeakVolumeError(*t.tracer, span, {&bright, &dark, &bright, &bright}, floor);
+  EXPECT_GT(leak, 0.0f);
+  // At most the cell's volume x the largest relative error a point can see (all-bright blend
+  // against the dark probe alone).
+  const float volume = glm::length(glm::dot(span[1] - span[0],
+                                            glm::cross(span[2] - span[0], span[3] - span[0]))) /
+                       6.0f;
+  EXPECT_LE(leak, volume * relativeIrradianceError(dark, bright, floor));
+}
+
 TEST(ProbePlacement, CliWritesPositionsThatBakeReads) {
   const std::string dir = test::makeTempDir("kiln_place");
   const std::string scene = test::scenesDir() + "/two_rooms.gltf";
@@ -249,42 +275,61 @@ TEST(ProbePlacement, CliWritesPositionsThatBakeReads) {
 }
 
 #else
-// The comparison on the shipped scenes (docs/probe_placement.md): at equal probe counts the
-// automatic placement's mean interpolated irradiance error at 1000 random valid points is
-// lower than a uniform grid's. Minutes; labelled slow.
-double csvMean(const std::string& csv, const std::string& method, size_t* count) {
+// The comparison on the shipped scenes with their default volumes (docs/probe_placement.md):
+// at equal probe counts (the automatic run's budget is the grid's count) the automatic
+// placement's mean interpolated irradiance error at 1000 random valid points is lower than a
+// uniform grid's, for two evaluation seeds. Minutes; labelled slow.
+struct CsvRow {
+  std::string method;
+  size_t count = 0;
+  double mean = 0.0;
+};
+std::vector<CsvRow> csvRows(const std::string& csv) {
+  std::vector<CsvRow> rows;
   std::istringstream in(csv);
   std::string line;
+  std::getline(in, line);  // header
   while (std::getline(in, line)) {
     std::vector<std::string> f;
     std::istringstream ls(line);
     std::string x;
     while (std::getline(ls, x, ',')) f.push_back(x);
-    if (f.size() >= 4 && f[1] == method) {
-      *count = std::stoul(f[2]);
-      return std::stod(f[3]);
-    }
+    if (f.size() >= 4) rows.push_back(CsvRow{f[1], std::stoul(f[2]), std::stod(f[3])});
   }
-  return -1.0;
+  return rows;
 }
 
 TEST(ProbePlacementSlow, AutomaticBeatsUniformGridOnShippedScenes) {
   const std::string dir = test::makeTempDir("kiln_place_slow");
-  for (const std::string& args : {std::string("two_rooms.gltf --volume 0,0,0,8.25,3,4"),
-                                 std::string("courtyard.gltf")}) {
-    std::string out;
-    const std::string cmd = std::string(test::kilnExe()) + " probes compare-placement " +
-                            test::scenesDir() + "/" + args +
-                            " --count 256 --points 1000 --eval-rays 2048 -q --csv " + dir +
-                            "/c.csv";
-    ASSERT_EQ(test::runCommand(cmd, &out), 0) << out;
-    const std::string csv = test::readTextFile(dir + "/c.csv");
-    size_t gridCount = 0, autoCount = 0;
-    const double grid = csvMean(csv, "uniform grid", &gridCount);
-    const double automatic = csvMean(csv, "automatic", &autoCount);
-    EXPECT_EQ(gridCount, 256u);
-    EXPECT_LE(autoCount, 256u);
-    EXPECT_LT(automatic, grid) << out;
+  for (const std::string scene : {"two_rooms.gltf", "courtyard.gltf"}) {
+    for (int evalSeed : {0, 1}) {
+      std::string out;
+      const std::string cmd = std::string(test::kilnExe()) + " probes compare-placement " +
+                              test::scenesDir() + "/" + scene +
+                              " --count 256 --points 1000 --eval-rays 2048 --eval-seed " +
+                              std::to_string(evalSeed) + " -q --csv " + dir + "/c.csv";
+      ASSERT_EQ(test::runCommand(cmd, &out), 0) << out;
+      const std::vector<CsvRow> rows = csvRows(test::readTextFile(dir + "/c.csv"));
+      const CsvRow* grid = nullptr;
+      const CsvRow* automatic = nullptr;
+      size_t fewestMatching = 0;  // fewest automatic probes with the grid's error or less
+      for (const CsvRow& r : rows) {
+        if (r.method == "uniform grid") grid = &r;
+        if (r.method == "automatic") automatic = &r;
+      }
+      ASSERT_TRUE(grid && automatic) << out;
+      for (const CsvRow& r : rows)
+        if (r.method != "uniform grid" && r.mean <= grid->mean &&
+            (fewestMatching == 0 || r.count < fewestMatching))
+          fewestMatching = r.count;
+      EXPECT_EQ(grid->count, 256u);
+      EXPECT_LE(automatic->count, 256u);
+      EXPECT_LT(automatic->mean, grid->mean) << scene << " eval seed " << evalSeed << "\n"
+                                              << out;
+      // Some automatic set (the final one at least) matches the grid with no more probes.
+      EXPECT_GT(fewestMatching, 0u) << out;
+      EXPECT_LE(fewestMatching, automatic->count) << out;
+    }
   }
 }
 #endif

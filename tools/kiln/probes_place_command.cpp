@@ -10,6 +10,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -79,6 +80,7 @@ struct CommonOptions {
   int checkPoints = 2048;  // training check points
   float spacing = 0.0f;
   int depth = 2;
+  float leakWeight = 1.0f;
   uint64_t seed = 0;
   int threads = 0;
   bool quiet = false;
@@ -100,6 +102,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
   s->checkPoints = uint32_t(o.checkPoints);
   s->spacing = o.spacing;
   s->maxDepth = o.depth;
+  s->leakWeight = o.leakWeight;
   s->seed = o.seed;
   s->threads = o.threads;
   s->bake.threads = o.threads;
@@ -124,6 +127,10 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
       ->check(CLI::NonNegativeNumber);
   c->add_option("--depth", o->depth, "Octree levels below the base spacing")
       ->check(CLI::Range(0, 6))
+      ->capture_default_str();
+  c->add_option("--leak-weight", o->leakWeight,
+                "Weight of the leak estimate (cells spanning walls) in a set's score (0 = off)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
   c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")
@@ -194,6 +201,8 @@ int runPlace(const PlaceOptions& o) {
                 {"initialError", placed->initialError},
                 {"estimatedError", placed->estimatedError},
                 {"estimatedError95", placed->estimatedError95},
+                {"estimatedLeak", placed->estimatedLeak},
+                {"leakRejected", placed->leakRejected},
                 {"rounds", placed->rounds},
                 {"pruned", placed->pruned},
                 {"seconds", placed->seconds}}}};
@@ -206,12 +215,14 @@ int runPlace(const PlaceOptions& o) {
               << placed->candidates << " valid candidates (" << placed->candidatesMoved
               << " moved out of or away from geometry, " << placed->candidatesDropped
               << " dropped; " << placed->spawned
-              << " probes added at check points); estimated mean relative irradiance error "
-              << std::setprecision(3)
-              << placed->estimatedError << " (95th percentile " << placed->estimatedError95
-              << ", from " << placed->initialError << ") at " << placed->checkPoints
-              << " check points; " << placed->rounds << " rounds, " << placed->pruned
-              << " pruned; " << std::setprecision(3) << placed->seconds << " s\n";
+              << " probes added at check points); estimated score (mean relative irradiance "
+              << "error + leak estimate) " << std::setprecision(3) << placed->estimatedError
+              << " (leak " << placed->estimatedLeak << ", 95th percentile of the error "
+              << placed->estimatedError95 << ", from " << placed->initialError << ") at "
+              << placed->checkPoints << " check points; " << placed->rounds << " rounds, "
+              << placed->pruned << " pruned, " << placed->leakRejected
+              << " picks dropped for leaks; " << std::setprecision(3) << placed->seconds
+              << " s\n";
   }
   return kExitOk;
 }
@@ -223,7 +234,8 @@ struct CompareOptions {
   int count = 256;
   int points = 1000;
   int evalRays = 4096;
-  std::string csv;
+  std::optional<uint64_t> evalSeed;  // default: derived from --seed
+  std::string csv, pointsCsv;
 };
 
 struct Row {
@@ -239,8 +251,11 @@ int runCompare(const CompareOptions& o) {
   ProbePlacementSettings settings;
   if (int code = makeSettings(o.common, &settings)) return code;
   settings.budget = uint32_t(o.count);
-  for (int div : {8, 6, 5, 4, 3, 2}) {
-    if (o.count / div >= 4) settings.snapshotCounts.push_back(uint32_t(o.count / div));
+  // Snapshots at these fractions of the count resolve the count automatic needs.
+  for (const auto& [num, den] : {std::pair{1, 8}, {1, 6}, {1, 5}, {1, 4}, {1, 3}, {1, 2},
+                                 {2, 3}, {3, 4}, {7, 8}}) {
+    const int n = o.count * num / den;
+    if (n >= 4) settings.snapshotCounts.push_back(uint32_t(n));
   }
   LoadedScene ls;
   if (int code = loadTraced(o.common.scene, &ls)) return code;
@@ -250,7 +265,8 @@ int runCompare(const CompareOptions& o) {
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
 
   // Evaluation points and their ground truth: a different seed from placement's check points.
-  const uint64_t evalSeed = hashValues(o.common.seed, 0x6576616cULL);  // "eval"
+  const uint64_t evalSeed =
+      hashValues(o.evalSeed ? *o.evalSeed : o.common.seed, 0x6576616cULL);  // "eval"
   const std::vector<vec3> points = randomValidPoints(scene, tracer, volumes, uint32_t(o.points),
                                                      evalSeed, settings.validity, o.common.threads);
   ProbeBakeSettings bake;
@@ -363,6 +379,23 @@ int runCompare(const CompareOptions& o) {
     table << "no automatic probe set reached the grid's mean error\n";
   }
   std::cout << table.str();
+  if (!o.pointsCsv.empty()) {
+    std::ostringstream pc;
+    pc << "x,y,z,near_wall,truth_rms";
+    for (const Row& r : rows) pc << "," << r.method << " " << r.count;
+    pc << "\n";
+    pc << std::setprecision(6);
+    for (size_t i = 0; i < points.size(); ++i) {
+      pc << points[i].x << "," << points[i].y << "," << points[i].z << "," << int(nearWall[i])
+         << "," << irradianceRms(truth[i]);
+      for (const Row& r : rows) pc << "," << r.error.perPoint[i];
+      pc << "\n";
+    }
+    if (Status s = writeText(o.pointsCsv, pc.str()); !s) {
+      printError(s.error());
+      return kExitBadInput;
+    }
+  }
   if (!o.csv.empty()) {
     if (Status s = writeText(o.csv, csv.str()); !s) {
       printError(s.error());
@@ -386,7 +419,7 @@ void registerProbesPlaceCommand(CLI::App& probes) {
       ->check(CLI::Range(4, 1 << 20))
       ->capture_default_str();
   p->add_option("--target-error", place->targetError,
-                "Stop at this mean relative irradiance error on the check points (0 = off)")
+                "Stop at this score: mean relative check error + leak estimate (0 = off)")
       ->check(CLI::NonNegativeNumber);
   p->add_flag("--no-prune", place->noPrune, "Do not remove probes that add nothing");
   p->callback(commandCallback([place]() { return runPlace(*place); }));
@@ -406,7 +439,11 @@ void registerProbesPlaceCommand(CLI::App& probes) {
   c->add_option("--eval-rays", compare->evalRays, "Rays per probe and per evaluation point")
       ->check(CLI::Range(1, 1 << 24))
       ->capture_default_str();
+  c->add_option("--eval-seed", compare->evalSeed,
+                "Seed of the evaluation points and their truth (default: --seed)");
   c->add_option("--csv", compare->csv, "Also write the table as CSV");
+  c->add_option("--points-csv", compare->pointsCsv,
+                "Also write every evaluation point's error per method as CSV");
   c->callback(commandCallback([compare]() { return runCompare(*compare); }));
 }
 
