@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "lightmap/atlas.h"
+#include "src/gltf_loader.h"
 
 namespace kiln {
 namespace {
@@ -110,38 +111,6 @@ std::optional<AccessorView> viewAccessor(const tinygltf::Model& m, int index) {
   return v;
 }
 
-double readComponent(const uint8_t* p, int type, bool normalized) {
-  switch (type) {
-    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
-      float f;
-      std::memcpy(&f, p, 4);
-      return f;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-      return normalized ? p[0] / 255.0 : p[0];
-    case TINYGLTF_COMPONENT_TYPE_BYTE: {
-      const int8_t v = int8_t(p[0]);
-      return normalized ? std::max(v / 127.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-      uint16_t v;
-      std::memcpy(&v, p, 2);
-      return normalized ? v / 65535.0 : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_SHORT: {
-      int16_t v;
-      std::memcpy(&v, p, 2);
-      return normalized ? std::max(v / 32767.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
-      uint32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-  }
-  return 0.0;
-}
-
 // The node's local matrix, as src/gltf_loader.cpp computes it (T x R x S or "matrix").
 glm::dmat4 localMatrix(const tinygltf::Node& n) {
   if (n.matrix.size() == 16) return glm::make_mat4(n.matrix.data());
@@ -205,7 +174,7 @@ std::optional<SourceMap> traceSources(const tinygltf::Model& m, const tinygltf::
       std::optional<AccessorView> iv = viewAccessor(m, prim.indices);
       if (!iv) return std::nullopt;
       for (size_t k = 0; k < iv->count; ++k) {
-        const double x = readComponent(iv->element(k), iv->componentType, false);
+        const double x = readGltfComponent(iv->element(k), iv->componentType, false);
         if (x >= double(vertexCount)) return std::nullopt;
         indices.push_back(uint32_t(x));
       }
@@ -231,9 +200,9 @@ std::optional<SourceMap> traceSources(const tinygltf::Model& m, const tinygltf::
     for (size_t v = 0; v < vertexCount; ++v) {
       const uint8_t* e = pv->element(v);
       const size_t cs = pv->elemSize / 3;
-      vec3 p(float(readComponent(e, pv->componentType, pv->normalized)),
-             float(readComponent(e + cs, pv->componentType, pv->normalized)),
-             float(readComponent(e + 2 * cs, pv->componentType, pv->normalized)));
+      vec3 p(float(readGltfComponent(e, pv->componentType, pv->normalized)),
+             float(readGltfComponent(e + cs, pv->componentType, pv->normalized)),
+             float(readGltfComponent(e + 2 * cs, pv->componentType, pv->normalized)));
       positions[v] = vec3(positionMatrix * vec4(p, 1.0f));
     }
     std::vector<bool> referenced(vertexCount, false);
@@ -353,7 +322,7 @@ int gatherAccessor(BinaryBuilder& bin, const AccessorView& v, const std::vector<
     for (int c = 0; c < v.components; ++c) {
       double lo = INFINITY, hi = -INFINITY;
       for (uint32_t k : indices) {
-        const double x = readComponent(v.element(k) + size_t(c) * cs, v.componentType, false);
+        const double x = readGltfComponent(v.element(k) + size_t(c) * cs, v.componentType, false);
         lo = std::min(lo, x);
         hi = std::max(hi, x);
       }

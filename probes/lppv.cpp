@@ -11,6 +11,7 @@
 #include <system_error>
 
 #include "src/parallel.h"
+#include "src/text_file.h"
 
 namespace kiln {
 namespace {
@@ -38,25 +39,6 @@ Json vecJson(glm::vec3 v) { return Json::array({v.x, v.y, v.z}); }
 
 const char* placementName(LppvPlacement p) {
   return p == LppvPlacement::kCellCorner ? "cellCorner" : "cellCenter";
-}
-
-Status writeTextAtomic(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return Error{tmp + ": cannot open for writing"};
-  const size_t written = std::fwrite(text.data(), 1, text.size(), f);
-  const bool closed = std::fclose(f) == 0;
-  if (written != text.size() || !closed) {
-    std::remove(tmp.c_str());
-    return Error{tmp + ": write failed"};
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
-  }
-  return Status::success();
 }
 
 }  // namespace
@@ -284,7 +266,7 @@ Result<LppvOutputFiles> writeLppvOutputs(const LppvVolume& volume, const std::st
     source["resolutionMode"] = "custom";
   }
   j["source"] = std::move(source);
-  if (Status st = writeTextAtomic(files.metadata, j.dump(2) + "\n"); !st) {
+  if (Status st = writeTextFileAtomically(files.metadata, j.dump(2) + "\n"); !st) {
     return Error{st.error()};
   }
   return files;

@@ -1482,6 +1482,10 @@ class Loader {
 
 }  // namespace
 
+double readGltfComponent(const uint8_t* p, int componentType, bool normalized) {
+  return readComponent(p, componentType, normalized);
+}
+
 Result<Scene> loadScene(const std::string& path, const LoadOptions& options) {
   try {
     return Loader(path, options).load();

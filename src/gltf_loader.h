@@ -7,6 +7,7 @@
 // generated, a missing texture image replaced by its factor.
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 #include "src/result.h"
@@ -20,5 +21,11 @@ struct LoadOptions {
 };
 
 Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {});
+
+// One accessor component at `p` as a double, for code that reads glTF buffers itself (the
+// output glTF writer): `componentType` is glTF's (5120 BYTE ... 5126 FLOAT); normalized
+// integers map to [0, 1] or [-1, 1] per glTF 2.0 (signed values clamped to -1). Only for
+// accessors loadScene accepted: other component types are a programmer error.
+double readGltfComponent(const uint8_t* p, int componentType, bool normalized);
 
 }  // namespace kiln

@@ -13,29 +13,10 @@
 #include <sstream>
 #include <thread>
 
+#include "src/text_file.h"
+
 namespace kiln::chart {
 namespace {
-
-Status writeFileAtomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return Error{path + ": cannot open for writing"};
-    out << text;
-    out.close();
-    if (!out) {
-      std::remove(tmp.c_str());
-      return Error{path + ": write failed"};
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": " + ec.message()};
-  }
-  return Status::success();
-}
 
 std::string csvCell(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
@@ -86,7 +67,7 @@ std::string chartCsv(const ChartTable& t) {
 }
 
 Status writeChartCsv(const std::string& dir, const ChartTable& t) {
-  return writeFileAtomically(dir + "/" + t.name + ".csv", chartCsv(t));
+  return writeTextFileAtomically(dir + "/" + t.name + ".csv", chartCsv(t));
 }
 
 std::string findGnuplot() {
@@ -123,7 +104,7 @@ Status renderChartPng(const std::string& gnuplot, const std::string& dir, const 
     << "set key noenhanced\n"
     << body << "\n"
     << "unset output\n";
-  if (Status st = writeFileAtomically(script, s.str()); !st) return st;
+  if (Status st = writeTextFileAtomically(script, s.str()); !st) return st;
   // Run gnuplot without a shell (paths may hold anything), stdout and stderr to the log.
   const pid_t pid = ::fork();
   if (pid < 0) {

@@ -18,6 +18,7 @@
 #include "src/progress.h"
 #include "src/tracer.h"
 #include "tools/kiln/cli_common.h"
+#include "src/text_file.h"
 
 namespace kiln::cli {
 namespace {
@@ -43,29 +44,6 @@ Json shJson(const ShL2Rgb& sh) {
   Json j = Json::array();
   for (const glm::vec3& c : sh.c) j.push_back(vecJson(c));
   return j;
-}
-
-// Writes `text` to `path` through a temporary file and a rename, so a failure never leaves
-// a half-written file.
-Status writeTextAtomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return Error{path + ": cannot open for writing"};
-    out << text;
-    out.close();
-    if (!out) {
-      std::remove(tmp.c_str());
-      return Error{path + ": write failed"};
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": " + ec.message()};
-  }
-  return Status::success();
 }
 
 // ---- bake ----------------------------------------------------------------------------------
@@ -297,7 +275,7 @@ int runExport(const ExportOptions& o) {
     std::cout << text;
     return kExitOk;
   }
-  if (Status s = writeTextAtomically(o.out, text); !s) {
+  if (Status s = writeTextFileAtomically(o.out, text); !s) {
     printError(s.error());
     return kExitBadInput;
   }

@@ -19,6 +19,7 @@
 #include "src/progress.h"
 #include "src/tracer.h"
 #include "tools/kiln/cli_common.h"
+#include "src/text_file.h"
 
 namespace kiln::cli {
 namespace {
@@ -26,27 +27,6 @@ namespace {
 using Json = nlohmann::json;
 
 Json vecJson(vec3 v) { return Json::array({v.x, v.y, v.z}); }
-
-Status writeText(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return Error{path + ": cannot open for writing"};
-    out << text;
-    out.close();
-    if (!out) {
-      std::remove(tmp.c_str());
-      return Error{path + ": write failed"};
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": " + ec.message()};
-  }
-  return Status::success();
-}
 
 // "minx,miny,minz,maxx,maxy,maxz" -> Bounds3.
 std::optional<Bounds3> parseVolume(const std::string& text) {
@@ -206,7 +186,7 @@ int runPlace(const PlaceOptions& o) {
                 {"rounds", placed->rounds},
                 {"pruned", placed->pruned},
                 {"seconds", placed->seconds}}}};
-  if (Status s = writeText(o.out, doc.dump(1) + "\n"); !s) {
+  if (Status s = writeTextFileAtomically(o.out, doc.dump(1) + "\n"); !s) {
     printError(s.error());
     return kExitBadInput;
   }
@@ -391,13 +371,13 @@ int runCompare(const CompareOptions& o) {
       for (const Row& r : rows) pc << "," << r.error.perPoint[i];
       pc << "\n";
     }
-    if (Status s = writeText(o.pointsCsv, pc.str()); !s) {
+    if (Status s = writeTextFileAtomically(o.pointsCsv, pc.str()); !s) {
       printError(s.error());
       return kExitBadInput;
     }
   }
   if (!o.csv.empty()) {
-    if (Status s = writeText(o.csv, csv.str()); !s) {
+    if (Status s = writeTextFileAtomically(o.csv, csv.str()); !s) {
       printError(s.error());
       return kExitBadInput;
     }

@@ -1,0 +1,31 @@
+// text_file.cpp: atomic text output (see text_file.h).
+#include "src/text_file.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+namespace kiln {
+
+Status writeTextFileAtomically(const std::string& path, std::string_view text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return Error{path + ": cannot open for writing"};
+    out.write(text.data(), std::streamsize(text.size()));
+    out.close();
+    if (!out) {
+      std::remove(tmp.c_str());
+      return Error{path + ": write failed"};
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
+  }
+  return Status::success();
+}
+
+}  // namespace kiln
