@@ -73,10 +73,10 @@ struct FillSettings {
 // by ring from their filled or valid same-object 8-neighbours (dilation restricted to the
 // object) until none is left that can be reached. With settings.maxRings > 0 only texels
 // within that many rings of a valid texel (or of a ringSeeds texel) of their object are
-// filled (and only from texels within those rings); deeper ones keep their values. Padding (objectId < 0) is left for
-// dilate. `objectId` empty = all texels belong to one object. Returns the mask afterwards
-// (`valid` | filled | kept). Weights use valid texels only, so the result is
-// order-independent.
+// filled (and only from texels within those rings); deeper ones keep their values. Padding
+// (objectId < 0) is left for dilate. `objectId` empty = all texels belong to one object.
+// Returns the mask afterwards (`valid` | filled | kept). Weights use valid texels only, so
+// the result is order-independent.
 std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid,
                                  const std::vector<int32_t>& objectId,
                                  const FillSettings& settings = {});
