@@ -182,20 +182,9 @@ std::optional<SourceMap> traceSources(const tinygltf::Model& m, const tinygltf::
       for (size_t k = 0; k < vertexCount; ++k) indices.push_back(uint32_t(k));
     }
     const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
-    std::vector<uvec3> tris;
-    if (mode == TINYGLTF_MODE_TRIANGLES) {
-      for (size_t k = 0; k + 2 < indices.size(); k += 3)
-        tris.emplace_back(indices[k], indices[k + 1], indices[k + 2]);
-    } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
-      for (size_t k = 0; k + 2 < indices.size(); ++k)
-        tris.push_back(k % 2 == 0 ? uvec3(indices[k], indices[k + 1], indices[k + 2])
-                                  : uvec3(indices[k + 1], indices[k], indices[k + 2]));
-    } else if (mode == TINYGLTF_MODE_TRIANGLE_FAN) {
-      for (size_t k = 1; k + 1 < indices.size(); ++k)
-        tris.emplace_back(indices[k], indices[k + 1], indices[0]);
-    } else {
-      return std::nullopt;
-    }
+    std::optional<std::vector<uvec3>> assembled = gltfTriangles(indices, mode);
+    if (!assembled) return std::nullopt;
+    const std::vector<uvec3>& tris = *assembled;
     std::vector<vec3> positions(vertexCount);
     for (size_t v = 0; v < vertexCount; ++v) {
       const uint8_t* e = pv->element(v);

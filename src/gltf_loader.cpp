@@ -1329,20 +1329,7 @@ class Loader {
       indices.resize(vertexCount);
       for (size_t k = 0; k < vertexCount; ++k) indices[k] = uint32_t(k);
     }
-    std::vector<uvec3> tris;
-    if (mode == TINYGLTF_MODE_TRIANGLES) {
-      for (size_t k = 0; k + 2 < indices.size(); k += 3)
-        tris.emplace_back(indices[k], indices[k + 1], indices[k + 2]);
-    } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
-      // glTF 2.0 spec, "Topology types": odd triangles swap their first two vertices so that
-      // every triangle keeps the strip's winding.
-      for (size_t k = 0; k + 2 < indices.size(); ++k)
-        tris.push_back(k % 2 == 0 ? uvec3(indices[k], indices[k + 1], indices[k + 2])
-                                  : uvec3(indices[k + 1], indices[k], indices[k + 2]));
-    } else {
-      for (size_t k = 1; k + 1 < indices.size(); ++k)
-        tris.emplace_back(indices[k], indices[k + 1], indices[0]);
-    }
+    std::vector<uvec3> tris = *gltfTriangles(indices, mode);  // mode checked above
 
     // World positions.
     std::vector<vec3> positions(vertexCount);
@@ -1481,6 +1468,26 @@ class Loader {
 };
 
 }  // namespace
+
+std::optional<std::vector<uvec3>> gltfTriangles(std::span<const uint32_t> indices, int mode) {
+  std::vector<uvec3> tris;
+  if (mode == TINYGLTF_MODE_TRIANGLES) {
+    for (size_t k = 0; k + 2 < indices.size(); k += 3)
+      tris.emplace_back(indices[k], indices[k + 1], indices[k + 2]);
+  } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+    // glTF 2.0 spec, "Topology types": odd triangles swap their first two vertices so that
+    // every triangle keeps the strip's winding.
+    for (size_t k = 0; k + 2 < indices.size(); ++k)
+      tris.push_back(k % 2 == 0 ? uvec3(indices[k], indices[k + 1], indices[k + 2])
+                                : uvec3(indices[k + 1], indices[k], indices[k + 2]));
+  } else if (mode == TINYGLTF_MODE_TRIANGLE_FAN) {
+    for (size_t k = 1; k + 1 < indices.size(); ++k)
+      tris.emplace_back(indices[k], indices[k + 1], indices[0]);
+  } else {
+    return std::nullopt;
+  }
+  return tris;
+}
 
 double readGltfComponent(const uint8_t* p, int componentType, bool normalized) {
   return readComponent(p, componentType, normalized);

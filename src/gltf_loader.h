@@ -8,7 +8,10 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "src/result.h"
 #include "src/scene.h"
@@ -27,5 +30,10 @@ Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {}
 // integers map to [0, 1] or [-1, 1] per glTF 2.0 (signed values clamped to -1). Only for
 // accessors loadScene accepted: other component types are a programmer error.
 double readGltfComponent(const uint8_t* p, int componentType, bool normalized);
+
+// The triangles a primitive's vertex indices make in glTF `mode` (4 TRIANGLES, 5
+// TRIANGLE_STRIP, 6 TRIANGLE_FAN), in the primitive's own numbering and winding; nullopt for
+// points and lines.
+std::optional<std::vector<uvec3>> gltfTriangles(std::span<const uint32_t> indices, int mode);
 
 }  // namespace kiln
