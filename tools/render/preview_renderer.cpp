@@ -4,6 +4,8 @@
 #include <stb_image.h>
 
 #include <algorithm>
+#include <array>
+#include <cassert>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +17,7 @@
 #include "kiln/lppv_volume.h"
 #include "kiln/probe_runtime.h"
 #include "lightmap/directional.h"
+#include "lightmap/seams.h"
 #include "probes/lppv.h"
 #include "src/integrator.h"
 #include "src/parallel.h"
@@ -130,21 +133,15 @@ std::optional<float> intersectSphere(const RenderSphere& sphere, vec3 origin, ve
 vec4 sampleBilinear(const Image& image, vec2 uv) {
   vec4 out(0.0f);
   if (image.empty()) return out;
-  float fx = uv.x * float(image.width) - 0.5f;
-  float fy = uv.y * float(image.height) - 0.5f;
-  if (!std::isfinite(fx)) fx = 0.0f;
-  if (!std::isfinite(fy)) fy = 0.0f;
-  fx = std::clamp(fx, 0.0f, float(image.width - 1));
-  fy = std::clamp(fy, 0.0f, float(image.height - 1));
-  const int x0 = std::min(int(fx), image.width - 1), y0 = std::min(int(fy), image.height - 1);
-  const int x1 = std::min(x0 + 1, image.width - 1), y1 = std::min(y0 + 1, image.height - 1);
-  const float tx = fx - float(x0), ty = fy - float(y0);
-  const int n = std::min(image.channels, 4);
-  for (int c = 0; c < n; ++c) {
-    const float a = image.at(x0, y0)[c] * (1.0f - tx) + image.at(x1, y0)[c] * tx;
-    const float b = image.at(x0, y1)[c] * (1.0f - tx) + image.at(x1, y1)[c] * tx;
-    out[c] = a * (1.0f - ty) + b * ty;
-  }
+  // The seam stitcher's lookup (lightmap/seams.h) on page texel points, which clamps to the
+  // edge texels; clamping the point first keeps huge or non-finite coordinates defined.
+  const vec2 size(float(image.width), float(image.height));
+  vec2 p = uv * size;
+  for (int a = 0; a < 2; ++a) p[a] = std::isfinite(p[a]) ? std::clamp(p[a], 0.0f, size[a]) : 0.0f;
+  std::array<float, 8> values{};
+  assert(image.channels <= int(values.size()));
+  kiln::sampleBilinear(image, p, values.data());
+  for (int c = 0; c < std::min(image.channels, 4); ++c) out[c] = values[size_t(c)];
   return out;
 }
 
