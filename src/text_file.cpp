@@ -1,4 +1,4 @@
-// text_file.cpp: atomic text output (see text_file.h).
+// text_file.cpp: atomic text output and JSON input (see text_file.h).
 #include "src/text_file.h"
 
 #include <cstdio>
@@ -26,6 +26,16 @@ Status writeTextFileAtomically(const std::string& path, std::string_view text) {
     return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
   }
   return Status::success();
+}
+
+Result<nlohmann::json> readJsonFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error{path + ": cannot open"};
+  try {
+    return nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    return Error{path + ": malformed JSON: " + e.what()};
+  }
 }
 
 }  // namespace kiln

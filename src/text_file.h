@@ -1,8 +1,10 @@
-// text_file.h: writing small text outputs (JSON, CSV, scripts) the way every kiln output is
-// written: into `path.tmp`, then renamed over `path`, so a failure or a cancelled run never
-// leaves a half-written file and an earlier file stays as it was.
+// text_file.h: small text files. Outputs (JSON, CSV, scripts) are written the way every kiln
+// output is written: into `path.tmp`, then renamed over `path`, so a failure or a cancelled
+// run never leaves a half-written file and an earlier file stays as it was. JSON inputs are
+// read with errors that name the file.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
 
@@ -13,5 +15,9 @@ namespace kiln {
 // Writes `text` to `path` atomically (temporary file + rename). On failure the temporary is
 // removed, `path` is untouched, and the error names the file.
 Status writeTextFileAtomically(const std::string& path, std::string_view text);
+
+// Reads and parses a JSON file (manifests, indexes, sphere lists). Errors name the file:
+// "<path>: cannot open", "<path>: malformed JSON: <the parser's message>".
+Result<nlohmann::json> readJsonFile(const std::string& path);
 
 }  // namespace kiln

@@ -7,7 +7,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -20,6 +19,7 @@
 #include "lightmap/lightmap_writer.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/progress.h"
+#include "src/text_file.h"
 #include "tools/kiln/cli_common.h"
 
 #ifndef KILN_VERSION
@@ -126,18 +126,12 @@ int applySceneSettings(const Scene& scene, LightmapBakeSettings& b) {
 // manifest (a different resolution would generate different UVs), so the command line may
 // not contradict them. Returns an exit code.
 int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& settings) {
-  std::ifstream in(o.lockAtlas, std::ios::binary);
-  if (!in) {
-    printError(o.lockAtlas + ": cannot open the --lock-atlas manifest");
+  Result<Json> read = readJsonFile(o.lockAtlas);
+  if (!read) {
+    printError("--lock-atlas: " + read.error());
     return kExitBadInput;
   }
-  Json manifest;
-  try {
-    manifest = Json::parse(in);
-  } catch (const Json::exception& e) {
-    printError(o.lockAtlas + ": malformed JSON: " + e.what());
-    return kExitBadInput;
-  }
+  Json manifest = std::move(read).value();
   if (manifest.is_object() && manifest.contains("settings") && manifest["settings"].is_object()) {
     const Json& s = manifest["settings"];
     auto take = [&](const char* key, const char* option, auto given, auto& field) -> bool {

@@ -5,28 +5,18 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "src/image.h"
+#include "src/text_file.h"
 
 namespace kiln {
 namespace {
 
 using Json = nlohmann::json;
 namespace fs = std::filesystem;
-
-Result<Json> readJson(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Error{path + ": cannot open the file"};
-  try {
-    return Json::parse(in);
-  } catch (const Json::exception& e) {
-    return Error{path + ": malformed JSON: " + e.what()};
-  }
-}
 
 // The mean of kiln's texels over one reference texel's footprint, the UV square
 // [x, x + 1] / W x [y, y + 1] / H mapped through scaleOffset: kFootprintSamples^2 lookups of
@@ -75,10 +65,10 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
                                                  const std::string& bakeDir, bool keepImages) {
   const fs::path refDir(referenceDir), outDir(bakeDir);
   const std::string indexPath = (refDir / "index.json").string();
-  Result<Json> index = readJson(indexPath);
+  Result<Json> index = readJsonFile(indexPath);
   if (!index) return Error{index.error()};
   const std::string manifestPath = (outDir / "manifest.json").string();
-  Result<Json> manifest = readJson(manifestPath);
+  Result<Json> manifest = readJsonFile(manifestPath);
   if (!manifest) return Error{manifest.error()};
   if (!index->contains("objects") || !(*index)["objects"].is_array())
     return Error{indexPath + ": needs an \"objects\" array"};

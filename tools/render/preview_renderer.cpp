@@ -23,6 +23,7 @@
 #include "src/parallel.h"
 #include "src/progress.h"
 #include "src/sampling.h"
+#include "src/text_file.h"
 
 namespace kiln {
 namespace {
@@ -45,16 +46,6 @@ bool readVec3(const Json& j, vec3& out) {
   for (int i = 0; i < 3; ++i)
     if (!readFinite(j[size_t(i)], out[i])) return false;
   return true;
-}
-
-Result<Json> readJsonFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Error{path + ": cannot open"};
-  try {
-    return Json::parse(in);
-  } catch (const Json::exception& e) {
-    return Error{path + ": malformed JSON: " + e.what()};
-  }
 }
 
 }  // namespace
