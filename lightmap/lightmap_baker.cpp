@@ -12,9 +12,10 @@
 //   - Validity is decided per sample point: a point whose first rays see back faces more
 //     often than backfaceTolerance is inside geometry and is dropped from its texel's value
 //     (a valid texel holds the mean over its unoccluded points); a texel is invalid when all
-//     its points are. Invalid texels: those within one ring (8-neighbours) of a valid texel
-//     of their object are filled from their valid neighbours, because a bilinear lookup at a
-//     visible surface point can read them; deeper ones (a floor under a block, a ceiling
+//     its points are. Invalid texels: those within one ring (8-neighbours) of a texel of
+//     their object with a point on the visible surface (outside geometry where it was
+//     rasterized, not moved by push-out) are filled from their valid neighbours, because a
+//     bilinear lookup at a visible surface point can read them; deeper ones (a floor under a block, a ceiling
 //     behind a lamp) keep the mean over all their samples, the physical irradiance of a
 //     surface enclosed by geometry (~0: paths end on back faces, shadow rays are blocked).
 //     Filling those from lit neighbours too (kiln's first policy) invents light that no
@@ -149,19 +150,15 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
     // Past the surface by the tracer's own offset (scale-aware) plus a thousandth of a texel.
     const vec3 exit = origin + nearest * direction;
     point.position = offsetRayOrigin(exit, direction) + (1e-3f * reach) * direction;
+    point.pushedOut = true;
   }
   return rays;
 }
 
 // Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
-// `pushed` gets, per page and texel, 1 where the texel's main sample point (its centre)
-// was moved: the centre lies inside a solid, not on the visible surface.
 bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                   const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
-                  bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays,
-                  std::vector<std::vector<uint8_t>>& pushed) {
-  pushed.resize(pages.size());
-  for (size_t p = 0; p < pages.size(); ++p) pushed[p].assign(pages[p].texels.size(), 0);
+                  bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays) {
   Progress progress("push-out", texels.size(), "texels", showProgress);
   options.progress = &progress;
   options.grain = 64;
@@ -174,9 +171,7 @@ bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& t
           TexelSample& texel = page.texels[texels[i].index];
           const uint32_t object = uint32_t(texel.object);
           const float reach = kPushReachTexels / layout.objects[object].texelsPerUnit;
-          const vec3 centre = texel.sample.position;
           local += pushOutPoint(scene, tracer, object, reach, texel.sample);
-          pushed[texels[i].page][texels[i].index] = texel.sample.position != centre ? 1 : 0;
           for (uint32_t s = 0; s < texel.subsampleCount; ++s)
             local += pushOutPoint(scene, tracer, object, reach,
                                   page.subsamples[texel.firstSubsample + s]);
@@ -196,6 +191,9 @@ struct TexelLight {
   vec4 shadowmask{1.0f};  // per channel: visible fraction of that channel's light
   vec4 direction{0.5f, 0.5f, 0.5f, 0.5f};  // encodeDominantDirection
   bool valid = false;
+  // One of its points lies on the visible surface where it was rasterized (not inside a
+  // solid, not moved by push-out): bilinear lookups at visible points read this texel.
+  bool onVisibleSurface = false;
 };
 
 // Per shadowmask channel, the scene lights that hold it (lights in one channel never
@@ -326,6 +324,7 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     }
     all.add(point);
     if (!inside) used.add(point);
+    if (!inside && !p.pushedOut) out.onVisibleSurface = true;
   }
   out.valid = used.samples > 0;
   const PointSums& sums = out.valid ? used : all;
@@ -381,7 +380,7 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
 
 // Stage 6 for one page: denoise, fill invalid texels, dilate into padding, stitch seams.
 void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
-              const RasterPage& raster, const std::vector<uint8_t>& pushed,
+              const RasterPage& raster,
               const std::vector<TexelRef>& texels,
               const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
               bool withShadowmask, const ParallelOptions& parallel,
@@ -421,20 +420,22 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   result.valid = page.valid;
   result.position = page.position;
 
-  // Invalid texels (inside geometry): those next to a valid texel of their object whose
-  // centre is on the visible surface (not moved by push-out) are read by bilinear lookups at
+  // Invalid texels (inside geometry): those next to a texel of their object with a point on
+  // the visible surface (TexelLight::onVisibleSurface; a texel whose centre push-out did not
+  // move may still lie more than a texel inside a solid) are read by bilinear lookups at
   // visible points, so they take the inverse-square average of their valid 8-neighbours
   // (radius 1.5 texels: only the adjacent ones, so a texel under a thin wall takes the side
   // it touches, not light from across the wall). The others are more than a texel from any
   // visible point and keep their physical value (lightTexel: ~0), as an independent renderer
   // bakes them (docs/lightmap_outputs.md).
-  std::vector<uint8_t> visibleCentre(n, 0);
-  for (size_t t = 0; t < n; ++t) visibleCentre[t] = raster.texels[t].valid() && !pushed[t];
+  std::vector<uint8_t> onVisible(n, 0);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (texels[i].page == pageIndex) onVisible[texels[i].index] = light[i].onVisibleSurface;
   FillSettings fill;
   fill.parallel = parallel;
   fill.radius = 1.5f;
   fill.maxRings = 1;
-  fill.ringSeeds = &visibleCentre;
+  fill.ringSeeds = &onVisible;
   DenoiseSettings denoiseSettings;
   denoiseSettings.parallel = parallel;
   if (settings.denoise) denoise(page, denoiseSettings);
@@ -552,9 +553,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   std::atomic<uint64_t> rays{0};
 
   // Stage 4: push-out.
-  std::vector<std::vector<uint8_t>> pushed;
   if (!pushOutStage(pages, texels, result.scene, result.layout, **tracer, showProgress, parallel,
-                    rays, pushed) ||
+                    rays) ||
       cancelled(cancel))
     return Error{"cancelled"};
 
@@ -592,7 +592,7 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());
   for (uint32_t p = 0; p < pages.size(); ++p) {
-    postPage(result.scene, result.layout, p, pages[p], pushed[p], texels, light, settings,
+    postPage(result.scene, result.layout, p, pages[p], texels, light, settings,
              withShadowmask,
              parallel, result.pages[p]);
     if (cancelled(cancel)) return Error{"cancelled"};

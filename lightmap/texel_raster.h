@@ -38,6 +38,7 @@ struct TexelPoint {
   vec2 point{0.0f};
   vec3 position{0.0f};
   vec3 normal{0.0f};
+  bool pushedOut = false;  // set by the baker's push-out: the point lay inside a solid
 };
 
 struct TexelSample {

@@ -324,6 +324,51 @@ TEST(LightmapBake, TexelsInsideGeometryAreInvalidAndDarkBeyondBilinearReach) {
   EXPECT_EQ(r->stats.invalidTexels, inside);
 }
 
+TEST(LightmapBake, SupersampledTexelsPushedOutOnlyInPartDoNotSpreadTheFill) {
+  // As above with 2 x 2 supersample points (at +-1/4 texel) and the block's face at
+  // x = 1.05 m. Column k = 8 (centre 1.0625) straddles the face: its points at x = 1.03125 lie
+  // on the visible quad. Column 9 (centre 1.1875, 1.1 texels inside) is out of the push-out's
+  // one-texel reach, but its points at x = 1.15625 (0.85 texels inside) are not: they are
+  // moved out, so the texel is valid and lit, and a bilinear lookup at the visible points
+  // just left of the face reads it. Column 10 (centre 2.1 texels inside, its nearest points
+  // 1.85) is invalid, and no visible point is within a texel of it: exactly 0. The fill's
+  // seeds are the texels with a point on the visible surface; counting column 9 as one (its
+  // centre was not moved, but only because push-out could not reach it) lit column 10 too,
+  // a band two texels deep inside every solid standing on a supersampled surface.
+  Scene scene = quadScene();
+  const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  const uint32_t block =
+      test::addBox(scene, "block", vec3(1.05f, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
+  scene.objects[block].settings.scaleInLightmap = 0.0f;
+  scene.sky = Sky::constant(vec3(1.0f));
+  LightmapBakeSettings s = smallSettings();
+  s.supersampling = 2;
+  s.bounces = 0;
+  auto r = bakeLightmaps(scene, s);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const AtlasObject& ao = r->layout.objects[0];
+  const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
+  const int w = page.light.width;
+  size_t dark = 0;
+  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+    for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
+      const size_t i = size_t(y) * w + x;
+      const int k = x - ao.texelMin.x;
+      const vec3 v = texel(page.light, i);
+      if (k >= 10) {
+        ++dark;
+        EXPECT_EQ(page.valid[i], 0) << x << "," << y;
+        EXPECT_EQ(v, vec3(0.0f)) << "beyond bilinear reach: dark (" << x << "," << y << ")";
+      } else {
+        EXPECT_EQ(page.valid[i], 1) << x << "," << y;
+        if (k >= 8) {
+          EXPECT_GT(v.x, 0.45f) << x << "," << y;
+        }
+      }
+    }
+  EXPECT_EQ(dark, 6u * 16u);
+}
+
 TEST(LightmapBake, BitIdenticalAtAnyThreadCount) {
   const Scene scene = loadShipped("cornell_box.gltf");
   ASSERT_FALSE(scene.objects.empty());

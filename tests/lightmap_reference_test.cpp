@@ -15,13 +15,12 @@
 // no larger than the reference's, so their mean over a reference texel is well defined.
 // Bounces: kiln's default cap, 64, is the reference's own setting (index.json).
 //
-// What is left (measured at --preset high --resolution 200: overall 2.57% RMSE, ratio
-// 1.0020; 0.52% and 0.9992 without the texels next to hidden ones): the floor (16.2%) and
+// What is left (measured at --preset high --resolution 200: overall 1.93% RMSE, ratio
+// 1.0012; 0.52% and 0.9992 without the texels next to hidden ones): the floor (11.4%) and
 // the ceiling (6.9%) at the edges of the blocks' footprints and of the lamp. kiln's texels
-// whose centre lies up to a texel inside a solid are pushed out and hold the light next to
-// it (so that bilinear lookups at visible points do not darken), a lit band about one kiln
-// texel wide inside each hidden region, where Cycles' footprint mean is dark. Every other
-// object is within 2.5%.
+// that a bilinear lookup at a visible point can read hold the light beside the solid (so
+// that such lookups do not darken), a lit band at most one kiln texel deep inside each
+// hidden region, where Cycles' footprint mean is dark. Every other object is within 2.5%.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -39,12 +38,12 @@ namespace {
 
 #ifdef KILN_REFERENCE_SLOW
 constexpr const char* kBakeArgs = "--preset high --resolution 200";
-// The targets are RMSE <= 2% and |ratio - 1| <= 1% over all texels. The ratio is
-// met; the RMSE is not (2.57%, see above): asserted as measured with a margin, and the
-// targets on the texels away from hidden ones.
-constexpr double kRmseBound = 0.03;
+// The targets: RMSE <= 2% and |ratio - 1| <= 1% over all texels (measured 1.93%,
+// 1.0012; the bake is deterministic, so the margin is not eaten by noise). Away from hidden
+// texels kiln is within the reference's own noise: 0.52% against a bound of 1%.
+constexpr double kRmseBound = 0.02;
 constexpr double kRatioBound = 0.01;
-constexpr double kVisibleRmseBound = 0.02;
+constexpr double kVisibleRmseBound = 0.01;
 constexpr double kVisibleRatioBound = 0.01;
 #else
 // --preset low (64 paths per texel, no supersampling) at 100 texels per metre (each object
