@@ -4,6 +4,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -20,33 +21,72 @@ struct GeometryData {
   uint32_t object = 0;
 };
 
-// Rejects hits on MASK triangles whose alpha (base colour factor x texture at UV0) is below
-// the material's cutoff. Installed as both the intersection and the occlusion filter: both
-// must agree, or a shadow ray and a closest-hit ray would disagree about the same surface.
-// Stateless per hit, so being called more than once for one primitive would be harmless.
-void alphaMaskFilter(const RTCFilterFunctionNArguments* args) {
+// The context of every occlusion query: Embree hands it to the occlusion filter, which
+// with opaqueOnly set lets rays pass BLEND surfaces (noting that one was there) instead of
+// stopping at them, so that transmittance() needs no closest-hit walk for the segments an
+// opaque surface blocks.
+struct OcclusionContext {
+  RTCIntersectContext base;  // first member: Embree's pointer to it is a pointer to this
+  bool opaqueOnly = false;
+  bool sawBlend = false;
+};
+
+// A hit on a MASK triangle whose alpha (base colour factor x texture at UV0) is below the
+// material's cutoff: no surface for any query.
+bool cutOut(const Scene& scene, uint32_t object, uint32_t prim, vec2 bary) {
+  const Material& m = scene.materials[scene.objects[object].triangleMaterial[prim]];
+  if (m.alphaMode != AlphaMode::Mask) return false;
+  const float alpha =
+      m.baseColorTexture < 0 ? m.baseColorFactor.a : scene.baseColorAt(object, prim, bary).a;
+  return alpha < m.alphaCutoff;
+}
+
+// The intersection filter: rejects cut-out hits. The occlusion filter below rejects the same
+// ones: both must agree, or a shadow ray and a closest-hit ray would disagree about the same
+// surface. Both are stateless per hit (the sawBlend flag only ever turns on), so being called
+// more than once for one primitive is harmless.
+void intersectFilter(const RTCFilterFunctionNArguments* args) {
   const auto* data = static_cast<const GeometryData*>(args->geometryUserPtr);
-  const Scene& scene = *data->scene;
-  const Object& object = scene.objects[data->object];
   for (unsigned int i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;  // inactive lane: its hit data is undefined
-    uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
-    const Material& m = scene.materials[object.triangleMaterial[prim]];
-    if (m.alphaMode != AlphaMode::Mask) continue;
-    vec2 bary(RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i));
-    float alpha = m.baseColorTexture < 0 ? m.baseColorFactor.a
-                                         : scene.baseColorAt(data->object, prim, bary).a;
-    if (alpha < m.alphaCutoff) args->valid[i] = 0;
+    const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
+    const vec2 bary(RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i));
+    if (cutOut(*data->scene, data->object, prim, bary)) args->valid[i] = 0;
   }
 }
 
-// Whether any triangle of `object` can be cut out, i.e. needs the filter at all.
+void occlusionFilter(const RTCFilterFunctionNArguments* args) {
+  const auto* data = static_cast<const GeometryData*>(args->geometryUserPtr);
+  auto* context = reinterpret_cast<OcclusionContext*>(args->context);
+  const Scene& scene = *data->scene;
+  for (unsigned int i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
+    const vec2 bary(RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i));
+    if (cutOut(scene, data->object, prim, bary)) {
+      args->valid[i] = 0;
+    } else if (context->opaqueOnly &&
+               scene.materials[scene.objects[data->object].triangleMaterial[prim]].alphaMode ==
+                   AlphaMode::Blend) {
+      context->sawBlend = true;
+      args->valid[i] = 0;
+    }
+  }
+}
+
+// Whether any triangle of `object` can be cut out, i.e. needs the filters at all.
 bool mayBeCutOut(const Scene& scene, const Object& object) {
   for (uint32_t mi : object.triangleMaterial) {
     const Material& m = scene.materials[mi];
     if (m.alphaMode != AlphaMode::Mask) continue;
     if (m.baseColorTexture >= 0 || m.baseColorFactor.a < m.alphaCutoff) return true;
   }
+  return false;
+}
+
+bool hasBlendTriangles(const Scene& scene, const Object& object) {
+  for (uint32_t mi : object.triangleMaterial)
+    if (scene.materials[mi].alphaMode == AlphaMode::Blend) return true;
   return false;
 }
 
@@ -97,7 +137,26 @@ constexpr int kMaxBlendCrossings = 256;
 // differ by a few ulps), near enough not to skip a distinct surface in practice.
 constexpr float kRelativeStep = 1e-5f;
 
+std::atomic<std::vector<Tracer::CapturedRay>*> gCapture{nullptr};
+std::mutex gCaptureMutex;
+
+[[gnu::noinline]] void appendCaptured(const Ray& ray, bool closestHit) {
+  std::lock_guard<std::mutex> lock(gCaptureMutex);
+  if (std::vector<Tracer::CapturedRay>* log = gCapture.load(std::memory_order_relaxed))
+    log->push_back({ray, closestHit});
+}
+
+inline void capture(const Ray& ray, bool closestHit) {
+  if (gCapture.load(std::memory_order_relaxed) != nullptr) [[unlikely]]
+    appendCaptured(ray, closestHit);
+}
+
 }  // namespace
+
+void Tracer::captureRays(std::vector<CapturedRay>* log) {
+  std::lock_guard<std::mutex> lock(gCaptureMutex);
+  gCapture.store(log, std::memory_order_relaxed);
+}
 
 struct Tracer::Impl {
   RTCDevice device = nullptr;
@@ -233,11 +292,10 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
       indices[3 * i + 1] = obj.triangles[i].y;
       indices[3 * i + 2] = obj.triangles[i].z;
     }
-    if (mayBeCutOut(scene, obj)) {
-      rtcSetGeometryUserData(geom, &impl.geometryData[o]);
-      rtcSetGeometryIntersectFilterFunction(geom, &alphaMaskFilter);
-      rtcSetGeometryOccludedFilterFunction(geom, &alphaMaskFilter);
-    }
+    const bool cutouts = mayBeCutOut(scene, obj), blend = hasBlendTriangles(scene, obj);
+    if (cutouts || blend) rtcSetGeometryUserData(geom, &impl.geometryData[o]);
+    if (cutouts) rtcSetGeometryIntersectFilterFunction(geom, &intersectFilter);
+    if (cutouts || blend) rtcSetGeometryOccludedFilterFunction(geom, &occlusionFilter);
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl.rtcScene, geom, o);
     rtcReleaseGeometry(geom);  // the scene holds its own reference
@@ -247,9 +305,7 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
 
   // Only materials some triangle uses count: an unused BLEND material must not cost every
   // shadow ray the slow transmittance walk.
-  for (const Object& obj : scene.objects)
-    for (uint32_t mi : obj.triangleMaterial)
-      if (scene.materials[mi].alphaMode == AlphaMode::Blend) tracer->hasBlend_ = true;
+  for (const Object& obj : scene.objects) tracer->hasBlend_ |= hasBlendTriangles(scene, obj);
   return tracer;
 }
 
@@ -263,6 +319,7 @@ bool Tracer::intersect(const Ray& ray, Hit& hit) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh = makeRayHit(ray);
+  capture(ray, true);
   rtcIntersect1(impl_->rtcScene, &context, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
 
@@ -279,33 +336,44 @@ bool Tracer::intersect(const Ray& ray, Hit& hit) const {
   return true;
 }
 
-bool Tracer::occluded(const Ray& ray) const {
-  // An empty range is never occluded; Embree would leave such a ray untouched, and a
-  // negative tMax must not be mistaken for its "occluded" mark below.
+namespace {
+// rtcOccluded1 over (tMin, tMax); false for an empty range, which Embree would leave
+// untouched and whose negative tMax must not be mistaken for its "occluded" mark.
+bool occludedQuery(RTCScene scene, const Ray& ray, OcclusionContext& context) {
   if (!(ray.tMin <= ray.tMax)) return false;
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
+  rtcInitIntersectContext(&context.base);
   RTCRay r = makeRay(ray);
-  rtcOccluded1(impl_->rtcScene, &context, &r);
+  capture(ray, false);
+  rtcOccluded1(scene, &context.base, &r);
   // Embree marks an occluded ray by setting tfar to -infinity.
   return r.tfar < 0.0f && std::isinf(r.tfar);
 }
+}  // namespace
+
+bool Tracer::occluded(const Ray& ray) const {
+  OcclusionContext context;
+  return occludedQuery(impl_->rtcScene, ray, context);
+}
 
 vec3 Tracer::transmittance(const Ray& ray) const {
-  // Any-hit first: most segments are either clear (done) or the walk below is needed anyway.
-  if (!occluded(ray)) return vec3(1.0f);
-  if (!hasBlend_) return vec3(0.0f);
+  if (!hasBlend_) return occluded(ray) ? vec3(0.0f) : vec3(1.0f);
+  // One any-hit query that passes BLEND surfaces: an opaque surface anywhere on the segment
+  // makes it 0 whatever it crosses first; a segment that met no BLEND surface is clear.
+  OcclusionContext context;
+  context.opaqueOnly = true;
+  if (occludedQuery(impl_->rtcScene, ray, context)) return vec3(0.0f);
+  if (!context.sawBlend) return vec3(1.0f);
 
-  // Walk the closest hits front to back: every crossed BLEND surface filters the light, any
-  // other surface stops it. The origin and direction stay fixed and only tMin moves, so
-  // Embree recomputes the same t for a surface already crossed and the step below skips it.
+  // Only BLEND surfaces in the way: walk their closest hits front to back, each filtering
+  // the light. The origin and direction stay fixed and only tMin moves, so Embree recomputes
+  // the same t for a surface already crossed and the step below skips it.
   vec3 result(1.0f);
   Ray segment = ray;
   for (int i = 0; i < kMaxBlendCrossings; ++i) {
     std::optional<Hit> hit = intersect(segment);
     if (!hit) return result;
     const Material& m = scene_.materialOf(hit->object, hit->triangle);
-    if (m.alphaMode != AlphaMode::Blend) return vec3(0.0f);
+    if (m.alphaMode != AlphaMode::Blend) return vec3(0.0f);  // at the segment's very end
     vec4 base = scene_.baseColorAt(hit->object, hit->triangle, hit->bary);
     result *= (1.0f - glm::clamp(base.a, 0.0f, 1.0f)) * glm::max(vec3(base), vec3(0.0f));
     if (maxComponent(result) <= 0.0f) return vec3(0.0f);

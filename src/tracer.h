@@ -13,6 +13,7 @@
 
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "src/math.h"
 #include "src/result.h"
@@ -56,6 +57,15 @@ class Tracer {
   vec3 transmittance(const Ray& ray) const;
 
   bool hasTranslucentSurfaces() const { return hasBlend_; }
+
+  // Ray capture, for benchmarks that time raw Embree on exactly the rays a bake traced:
+  // while a log is set, every Embree query of every Tracer (from any thread, serialized by a
+  // mutex) appends its ray to it. Off (nullptr) by default, and then one relaxed load.
+  struct CapturedRay {
+    Ray ray;
+    bool closestHit = false;  // rtcIntersect1; else rtcOccluded1
+  };
+  static void captureRays(std::vector<CapturedRay>* log);
   const Scene& scene() const { return scene_; }
 
  private:
