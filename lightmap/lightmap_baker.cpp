@@ -553,6 +553,7 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   std::atomic<uint64_t> rays{0};
 
   // Stage 4: push-out.
+  const auto start = std::chrono::steady_clock::now();
   if (!pushOutStage(pages, texels, result.scene, result.layout, **tracer, showProgress, parallel,
                     rays) ||
       cancelled(cancel))
@@ -582,7 +583,6 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.directional = settings.directional;
   ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
   std::vector<TexelLight> light;
-  const auto start = std::chrono::steady_clock::now();
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
       cancelled(cancel))
     return Error{"cancelled"};

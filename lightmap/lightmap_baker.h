@@ -107,7 +107,7 @@ struct LightmapBakeStats {
   size_t texels = 0;        // texels baked (covered by objects)
   size_t invalidTexels = 0;  // inside geometry, filled from neighbours
   uint64_t rays = 0;        // every ray traced (push-out, integrator, AO)
-  double seconds = 0.0;     // wall time of the light stage
+  double seconds = 0.0;     // wall time of the stages that trace them (push-out and light)
 };
 
 struct LightmapBakeResult {
