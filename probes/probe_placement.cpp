@@ -83,14 +83,18 @@ PointProbe probePoint(const Scene& scene, const Tracer& tracer, vec3 p, uint32_t
         out.nearestBackDirection = dir;
       }
     }
-    if (hit->t < out.nearestDistance) {
-      const float c = glm::dot(dir, hit->geometricNormal);
-      out.nearestDistance = hit->t;
-      out.nearestNormal = c > 0.0f ? -hit->geometricNormal : hit->geometricNormal;
-      out.nearestPlaneDistance = hit->t * std::abs(c);
-    }
   }
   out.backfaceRatio = rays ? float(back) / float(rays) : 0.0f;
+  if (const std::optional<Tracer::NearestSurface> n = tracer.nearestSurface(p)) {
+    out.nearestDistance = n->distance;
+    if (n->distance > 0.0f) {
+      out.nearestNormal = (p - n->point) / n->distance;
+    } else {
+      // On the surface: its face normal (either side; the inside test moves points that
+      // are inside a solid through its back faces first).
+      out.nearestNormal = scene.objects[n->object].faceNormal(n->triangle);
+    }
+  }
   return out;
 }
 
@@ -106,8 +110,8 @@ RelocatedPoint relocateProbePoint(const Scene& scene, const Tracer& tracer, vec3
                                   std::span<const Bounds3> volumes) {
   RelocatedPoint out;
   out.position = p;
-  // Moves aim 10% past the minimum distance so that the ray estimate of the distance (an
-  // upper bound within a few percent at 96+ rays) still passes after the move.
+  // Moves aim 10% past the minimum distance: a margin for float error and for the other
+  // surfaces near the point, which the next pass measures again.
   const float target = 1.1f * settings.minSurfaceDistance;
   for (int move = 0; move <= settings.maxMoves; ++move) {
     const PointProbe pp = probePoint(scene, tracer, out.position, settings.rays);
@@ -134,10 +138,10 @@ RelocatedPoint relocateProbePoint(const Scene& scene, const Tracer& tracer, vec3
       out.why += "inside geometry (" + std::to_string(int(std::lround(100 * pp.backfaceRatio))) +
                  "% back faces): moved " + formatMetres(step) + " through the nearest back face";
     } else {
-      const float step = std::max(target - pp.nearestPlaneDistance, 0.01f * target);
+      const float step = std::max(target - pp.nearestDistance, 0.01f * target);
       out.position += pp.nearestNormal * step;
       out.why += "within " + formatMetres(pp.nearestDistance) + " of a surface: pushed " +
-                 formatMetres(step) + " along its normal";
+                 formatMetres(step) + " away from it";
     }
     out.moved = true;
   }

@@ -51,11 +51,13 @@ struct ProbeValiditySettings {
 // What rays see from a point.
 struct PointProbe {
   float backfaceRatio = 0.0f;
-  float nearestDistance = kInfinity;  // nearest hit of any kind (upper bound of the distance)
+  // Exact distance to the nearest surface point (Tracer::nearestSurface: corners and edges
+  // too, which a few hundred rays can miss by centimetres) ...
+  float nearestDistance = kInfinity;
   vec3 nearestBackDirection{0.0f};     // unit ray direction of the nearest back-face hit
   float nearestBackDistance = kInfinity;
-  vec3 nearestNormal{0.0f};  // unit normal of the nearest hit surface, facing the point
-  float nearestPlaneDistance = kInfinity;  // distance to the nearest hit's plane
+  // ... and the unit direction from that point to p: moving p along it gains distance from it.
+  vec3 nearestNormal{0.0f};
 };
 PointProbe probePoint(const Scene& scene, const Tracer& tracer, vec3 p, uint32_t rays);
 

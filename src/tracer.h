@@ -58,6 +58,16 @@ class Tracer {
 
   bool hasTranslucentSurfaces() const { return hasBlend_; }
 
+  // The surface point nearest to p within maxDistance (Embree's BVH point query, exact
+  // point-triangle distances), over every triangle: cut-out and BLEND ones count as surfaces.
+  struct NearestSurface {
+    float distance = kInfinity;
+    vec3 point{0.0f};
+    uint32_t object = 0;
+    uint32_t triangle = 0;
+  };
+  std::optional<NearestSurface> nearestSurface(vec3 p, float maxDistance = kInfinity) const;
+
   // Ray capture, for benchmarks that time raw Embree on exactly the rays a bake traced:
   // while a log is set, every Embree query of every Tracer (from any thread, serialized by a
   // mutex) appends its ray to it. Off (nullptr) by default, and then one relaxed load.

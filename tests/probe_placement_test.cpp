@@ -94,6 +94,25 @@ TEST(ProbePlacement, CandidateInsideSolidBlockIsMovedOutOrDropped) {
   EXPECT_TRUE(w.position.x < 2.0f - 0.09f || w.position.x > 2.2f + 0.09f);
 }
 
+TEST(ProbePlacement, DistanceToACornerIsExact) {
+  // 5 cm off the block's top corner (1.2, 0.6, 1.4) along each axis: 8.66 cm from it, under
+  // the 10 cm minimum. Few rays come that close (the corner is a point; rays towards the top
+  // and side faces meet them farther out), so a ray estimate passes the point; the exact
+  // nearest-surface distance does not, and relocation moves it to 1.1 x the minimum.
+  const Traced t = traced(twoCells());
+  ProbeValiditySettings v;
+  const vec3 p(1.25f, 0.65f, 1.45f);
+  const PointProbe pp = probePoint(t.scene, *t.tracer, p, v.rays);
+  EXPECT_NEAR(pp.nearestDistance, std::sqrt(3.0f) * 0.05f, 1e-5f);
+  EXPECT_NEAR(glm::length(pp.nearestNormal - glm::normalize(vec3(1.0f))), 0.0f, 1e-5f);
+  EXPECT_FALSE(isValidProbePoint(t.scene, *t.tracer, p, v));
+  const RelocatedPoint r = relocateProbePoint(t.scene, *t.tracer, p, v);
+  ASSERT_TRUE(r.valid) << r.why;
+  EXPECT_TRUE(r.moved);
+  EXPECT_NEAR(glm::length(r.position - vec3(1.2f, 0.6f, 1.4f)), 1.1f * v.minSurfaceDistance, 1e-5f)
+      << r.why;
+}
+
 TEST(ProbePlacement, NoFinalProbeInsideGeometryOrNearASurface) {
   const Traced t = traced(twoCells());
   const ProbePlacementSettings s = smallSettings();

@@ -185,6 +185,35 @@ TEST(Tracer, Misses) {
   EXPECT_FALSE(makeTracer(scene)->hasTranslucentSurfaces());
 }
 
+TEST(Tracer, NearestSurfaceIsExactOnFacesEdgesAndCorners) {
+  // A box [0, 1]^3 and a floor quad far below: the nearest point is on a face, an edge or a
+  // corner depending on the Voronoi region of the query point, at the analytic distance.
+  Scene scene;
+  const uint32_t m = addMaterial(scene, lambert(vec3(0.5f)));
+  addBox(scene, "box", vec3(0.0f), vec3(1.0f), m, false);
+  addFloor(scene, -10.0f, m, 50.0f);
+  const auto tracer = makeTracer(scene);
+  struct Case {
+    vec3 p, nearest;
+  };
+  for (const Case& c : {Case{vec3(0.5f, 0.5f, 1.3f), vec3(0.5f, 0.5f, 1.0f)},    // face
+                        Case{vec3(1.2f, 0.5f, 1.2f), vec3(1.0f, 0.5f, 1.0f)},    // edge
+                        Case{vec3(-0.1f, -0.2f, 1.2f), vec3(0.0f, 0.0f, 1.0f)},  // corner
+                        Case{vec3(0.5f, 0.5f, 0.4f), vec3(0.5f, 0.5f, 0.0f)}}) { // inside
+    const auto n = tracer->nearestSurface(c.p);
+    ASSERT_TRUE(n.has_value());
+    EXPECT_NEAR(n->distance, glm::length(c.p - c.nearest), 1e-6f);
+    EXPECT_NEAR(glm::length(n->point - c.nearest), 0.0f, 1e-6f);
+    EXPECT_EQ(n->object, 0u);
+  }
+  // Far below the box, the floor is nearer; with a radius that reaches neither: nothing.
+  const auto floor = tracer->nearestSurface(vec3(3.0f, 3.0f, -9.5f));
+  ASSERT_TRUE(floor.has_value());
+  EXPECT_EQ(floor->object, 1u);
+  EXPECT_NEAR(floor->distance, 0.5f, 1e-6f);
+  EXPECT_FALSE(tracer->nearestSurface(vec3(3.0f, 3.0f, 3.0f), 1.0f).has_value());
+}
+
 TEST(Tracer, EmptyObjectsKeepObjectIndices) {
   Scene scene;
   uint32_t m = addMaterial(scene, lambert(vec3(0.5f)));
