@@ -275,53 +275,62 @@ TEST(LightmapBake, TwoRoomsNoSunLeaksThroughTheSharedWall) {
   EXPECT_GT(patch, 20u);
 }
 
-TEST(LightmapBake, TexelsInsideGeometryAreInvalidAndDarkBeyondBilinearReach) {
-  // The quad (x in [0, 2]) runs into a solid block that encloses its half x > 1: texels
-  // more than a texel inside see only the block's back faces. Constant sky, no bounces.
-  // Texel columns (centres at (k + 0.5) / 8 m): k = 8 (centre 1/16 m inside) lies within the
-  // push-out reach: moved out past the block's face, valid, lit. k >= 9 is invalid, and
-  // more than a texel from any visible point of the quad (x <= 1), so no bilinear lookup
-  // reads it: it keeps its physical irradiance, exactly 0 (the sky's shadow rays and every
-  // path end on the block), as an independent renderer bakes it, instead of light filled
-  // in from its neighbours. (Invalid texels next to a visible centre are filled:
-  // lightmap_post_test's LightmapFill.)
+// The quad (x in [0, 2], 8 texels per metre) running into a solid block whose face is at
+// x = faceX (the block encloses the quad beyond it; it gets no lightmap), under a constant
+// sky, no bounces. Calls f(column k, valid, value) for every texel of the quad, k = texel
+// column along x (centres at (k + 0.5) / 8 m); returns the bake's invalid-texel count.
+template <typename F>
+size_t bakeQuadIntoBlock(float faceX, int supersampling, F f) {
   Scene scene = quadScene();
   const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
   const uint32_t block =
-      test::addBox(scene, "block", vec3(1.0f, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
+      test::addBox(scene, "block", vec3(faceX, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
   scene.objects[block].settings.scaleInLightmap = 0.0f;
   scene.sky = Sky::constant(vec3(1.0f));
   LightmapBakeSettings s = smallSettings();
+  s.supersampling = supersampling;
   s.bounces = 0;
   auto r = bakeLightmaps(scene, s);
-  ASSERT_TRUE(r.ok()) << r.error();
+  EXPECT_TRUE(r.ok()) << r.error();
+  if (!r.ok()) return 0;
   const AtlasObject& ao = r->layout.objects[0];
   const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
-  const int w = page.light.width;
-  size_t inside = 0, pushed = 0;
   for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
     for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
-      const size_t i = size_t(y) * w + x;
-      const int k = x - ao.texelMin.x;  // u = x along the quad
-      const vec3 v = texel(page.light, i);
-      if (k >= 9) {
-        ++inside;
-        EXPECT_EQ(page.valid[i], 0) << x << "," << y;
-        EXPECT_EQ(v, vec3(0.0f)) << "enclosed: dark, not filled (" << x << "," << y << ")";
-      } else if (k == 8) {
-        ++pushed;
-        EXPECT_EQ(page.valid[i], 1) << x << "," << y;
-        // At the block's foot the block hides less than half the sky (E / pi in (0.5, 1) L),
-        // not the darkness a point inside it would see.
-        EXPECT_GT(v.x, 0.45f);
-        EXPECT_LT(v.x, 1.0f);
-      } else {
-        EXPECT_EQ(page.valid[i], 1);
-      }
+      const size_t i = size_t(y) * page.light.width + x;
+      f(x - ao.texelMin.x, page.valid[i] != 0, texel(page.light, i));
     }
+  return r->stats.invalidTexels;
+}
+
+TEST(LightmapBake, TexelsInsideGeometryAreInvalidAndDarkBeyondBilinearReach) {
+  // The block encloses the quad's half x > 1: texels more than a texel inside see only the
+  // block's back faces. k = 8 (centre 1/16 m inside) lies within the push-out reach: moved
+  // out past the block's face, valid, lit. k >= 9 is invalid, and more than a texel from any
+  // visible point of the quad (x <= 1), so no bilinear lookup reads it: it keeps its
+  // physical irradiance, exactly 0 (the sky's shadow rays and every path end on the block),
+  // as an independent renderer bakes it, instead of light filled in from its neighbours.
+  // (Invalid texels next to a visible centre are filled: lightmap_post_test's LightmapFill.)
+  size_t inside = 0, pushed = 0;
+  const size_t invalid = bakeQuadIntoBlock(1.0f, 1, [&](int k, bool valid, vec3 v) {
+    if (k >= 9) {
+      ++inside;
+      EXPECT_FALSE(valid) << k;
+      EXPECT_EQ(v, vec3(0.0f)) << "enclosed: dark, not filled (column " << k << ")";
+    } else if (k == 8) {
+      ++pushed;
+      EXPECT_TRUE(valid);
+      // At the block's foot the block hides less than half the sky (E / pi in (0.5, 1) L),
+      // not the darkness a point inside it would see.
+      EXPECT_GT(v.x, 0.45f);
+      EXPECT_LT(v.x, 1.0f);
+    } else {
+      EXPECT_TRUE(valid) << k;
+    }
+  });
   EXPECT_EQ(inside, 7u * 16u);
   EXPECT_EQ(pushed, 1u * 16u);
-  EXPECT_EQ(r->stats.invalidTexels, inside);
+  EXPECT_EQ(invalid, inside);
 }
 
 TEST(LightmapBake, SupersampledTexelsPushedOutOnlyInPartDoNotSpreadTheFill) {
@@ -335,37 +344,19 @@ TEST(LightmapBake, SupersampledTexelsPushedOutOnlyInPartDoNotSpreadTheFill) {
   // seeds are the texels with a point on the visible surface; counting column 9 as one (its
   // centre was not moved, but only because push-out could not reach it) lit column 10 too,
   // a band two texels deep inside every solid standing on a supersampled surface.
-  Scene scene = quadScene();
-  const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
-  const uint32_t block =
-      test::addBox(scene, "block", vec3(1.05f, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
-  scene.objects[block].settings.scaleInLightmap = 0.0f;
-  scene.sky = Sky::constant(vec3(1.0f));
-  LightmapBakeSettings s = smallSettings();
-  s.supersampling = 2;
-  s.bounces = 0;
-  auto r = bakeLightmaps(scene, s);
-  ASSERT_TRUE(r.ok()) << r.error();
-  const AtlasObject& ao = r->layout.objects[0];
-  const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
-  const int w = page.light.width;
   size_t dark = 0;
-  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
-    for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
-      const size_t i = size_t(y) * w + x;
-      const int k = x - ao.texelMin.x;
-      const vec3 v = texel(page.light, i);
-      if (k >= 10) {
-        ++dark;
-        EXPECT_EQ(page.valid[i], 0) << x << "," << y;
-        EXPECT_EQ(v, vec3(0.0f)) << "beyond bilinear reach: dark (" << x << "," << y << ")";
-      } else {
-        EXPECT_EQ(page.valid[i], 1) << x << "," << y;
-        if (k >= 8) {
-          EXPECT_GT(v.x, 0.45f) << x << "," << y;
-        }
+  bakeQuadIntoBlock(1.05f, 2, [&](int k, bool valid, vec3 v) {
+    if (k >= 10) {
+      ++dark;
+      EXPECT_FALSE(valid) << k;
+      EXPECT_EQ(v, vec3(0.0f)) << "beyond bilinear reach: dark (column " << k << ")";
+    } else {
+      EXPECT_TRUE(valid) << k;
+      if (k >= 8) {
+        EXPECT_GT(v.x, 0.45f) << k;
       }
     }
+  });
   EXPECT_EQ(dark, 6u * 16u);
 }
 
