@@ -15,9 +15,10 @@
 //     its points are. Invalid texels: those within one ring (8-neighbours) of a texel of
 //     their object with a point on the visible surface (outside geometry where it was
 //     rasterized, not moved by push-out) are filled from their valid neighbours, because a
-//     bilinear lookup at a visible surface point can read them; deeper ones (a floor under a block, a ceiling
-//     behind a lamp) keep the mean over all their samples, the physical irradiance of a
-//     surface enclosed by geometry (~0: paths end on back faces, shadow rays are blocked).
+//     bilinear lookup at a visible surface point can read them; deeper ones (a floor under
+//     a block, a ceiling behind a lamp) keep the mean over all their samples, the physical
+//     irradiance of a surface enclosed by geometry (~0: paths end on back faces, shadow
+//     rays are blocked).
 //     Filling those from lit neighbours too (kiln's first policy) invents light that no
 //     surface point there receives; Cycles bakes them black.
 //   - Post order: denoise (valid texels only), then fill invalid texels from the denoised

@@ -1,5 +1,5 @@
-// tracer.cpp: the Embree 3 scene behind kiln::Tracer (geometry upload, alpha-mask filter,
-// closest-hit / any-hit / transmittance queries).
+// tracer.cpp: the Embree 3 scene behind kiln::Tracer (geometry upload, alpha-mask and BLEND
+// filters, closest-hit / any-hit / transmittance / nearest-surface queries, ray capture).
 #include "src/tracer.h"
 
 #include <embree3/rtcore.h>

@@ -76,6 +76,7 @@ class Tracer {
     bool closestHit = false;  // rtcIntersect1; else rtcOccluded1
   };
   static void captureRays(std::vector<CapturedRay>* log);
+
   const Scene& scene() const { return scene_; }
 
  private:
