@@ -388,6 +388,42 @@ TEST(Tracer, BlendLayersMultiplyAndOpaqueStops) {
   EXPECT_FLOAT_EQ(tracer->transmittance(r).b, 0.75f * 0.2f);
 }
 
+TEST(Tracer, TransmittanceBlockedBehindBlendCostsOneQueryAndCaptureSeesEveryQuery) {
+  // The scene above; Tracer::captureRays records each Embree query. A segment that an opaque
+  // surface blocks (behind both BLEND layers) takes one any-hit query that passes the BLEND
+  // layers, no closest-hit walk; a segment through the two layers alone takes the any-hit
+  // query and a walk of three closest hits (two layers, then the miss); a clear segment one.
+  Scene scene;
+  addFloor(scene, 0.0f, addMaterial(scene, blend(vec3(1.0f, 0.5f, 0.2f), 0.25f)));
+  addFloor(scene, 1.0f, addMaterial(scene, blend(vec3(0.5f, 1.0f, 1.0f), 0.5f)));
+  addFloor(scene, -2.0f, addMaterial(scene, lambert(vec3(0.5f))), 0.5f);
+  auto tracer = makeTracer(scene);
+  std::vector<Tracer::CapturedRay> log;
+  auto count = [&](bool closestHit) {
+    size_t n = 0;
+    for (const Tracer::CapturedRay& c : log) n += c.closestHit == closestHit ? 1 : 0;
+    return n;
+  };
+  Tracer::captureRays(&log);
+  EXPECT_EQ(tracer->transmittance(down(0.1f, 0.1f)), vec3(0.0f));
+  EXPECT_EQ(log.size(), 1u);
+  EXPECT_EQ(count(false), 1u);
+  EXPECT_EQ(log[0].ray.origin, down(0.1f, 0.1f).origin);
+  log.clear();
+  EXPECT_GT(tracer->transmittance(down(0.8f, 0.8f)).g, 0.0f);
+  EXPECT_EQ(count(false), 1u);
+  EXPECT_EQ(count(true), 3u);
+  log.clear();
+  EXPECT_EQ(tracer->transmittance(Ray{vec3(0.0f, 0.0f, 2.0f), vec3(0, 0, 1)}), vec3(1.0f));
+  EXPECT_TRUE(tracer->intersect(down(0.1f, 0.1f)).has_value());
+  EXPECT_EQ(count(false), 1u);
+  EXPECT_EQ(count(true), 1u);
+  Tracer::captureRays(nullptr);
+  log.clear();
+  (void)tracer->occluded(down(0.1f, 0.1f));
+  EXPECT_TRUE(log.empty());
+}
+
 TEST(Tracer, OpaqueInFrontOfBlendStops) {
   Scene scene;
   addFloor(scene, 0.0f, addMaterial(scene, blend(vec3(1.0f), 0.1f)));
