@@ -104,7 +104,11 @@ TEST(ProbeScenes, NoPlacedProbeInsideGeometryOnTheShippedScenes) {
 // light: at each point the interpolated irradiance is compared with SH baked directly there
 // (the truth) and with the truth at the mirror point in room A, in front of the patch. A
 // tetrahedron from a room-A probe through the wall would pull the value towards room A's.
-// (The placement is a quick one: 64-probe budget, 256 check points.)
+// (The placement is a quick one: 64-probe budget, 256 check points.) Known fragility: with
+// 2048 check points, or another sampling sequence, this placement leaves these points below
+// its lowest probes, extrapolated from a hull face that spans the wall: ~0.02 lux, which
+// fails the second bound (docs/probe_placement.md, "What is left").
+
 TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
   const Loaded l = load("two_rooms.gltf");
   ProbePlacementSettings s = quickPlacement(64);
