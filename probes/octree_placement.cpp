@@ -3,9 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <set>
 #include <string>
-#include <tuple>
 
 #include "src/parallel.h"
 
@@ -73,11 +71,6 @@ struct OctreeWalk {
     }
   }
 };
-
-std::tuple<int64_t, int64_t, int64_t> quantize(vec3 p, float cell) {
-  return {int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
-          int64_t(std::floor(p.z / cell))};
-}
 
 }  // namespace
 
@@ -169,17 +162,12 @@ Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& 
       options);
 
   // Relocated corners that landed on the same spot are merged (as the uniform grid does).
-  std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
-  const float mergeCell = 0.5f * settings.validity.minSurfaceDistance;
   for (const RelocatedPoint& r : judged) {
-    if (!r.valid) {
-      ++out.dropped;
-      continue;
-    }
-    if (r.moved) ++out.moved;
-    if (mergeCell > 0.0f && !seen.insert(quantize(r.position, mergeCell)).second) continue;
-    out.positions.push_back(r.position);
+    out.dropped += r.valid ? 0u : 1u;
+    out.moved += r.valid && r.moved ? 1u : 0u;
   }
+  for (size_t i : distinctValidPoints(judged, settings.validity.minSurfaceDistance))
+    out.positions.push_back(judged[i].position);
   if (out.positions.empty())
     return Error{"octree placement: no valid corner at level " + std::to_string(settings.level)};
   return out;

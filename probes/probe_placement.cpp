@@ -10,6 +10,7 @@
 #include <map>
 #include <numeric>
 #include <set>
+#include <tuple>
 #include <sstream>
 
 #include "kiln/probe_runtime.h"
@@ -55,12 +56,6 @@ float percentile(std::vector<float> v, double q) {
   const size_t k = std::min(v.size() - 1, size_t(std::ceil(q * double(v.size()))) - 1);
   std::nth_element(v.begin(), v.begin() + ptrdiff_t(k), v.end());
   return v[k];
-}
-
-// Quantized position for de-duplicating relocated points that landed on the same spot.
-std::tuple<int64_t, int64_t, int64_t> quantize(vec3 p, float cell) {
-  return {int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
-          int64_t(std::floor(p.z / cell))};
 }
 
 }  // namespace
@@ -200,14 +195,11 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
   return out;
 }
 
-namespace {
-
-// Relocates every point in parallel (results in input order).
-std::vector<RelocatedPoint> relocateAll(const Scene& scene, const Tracer& tracer,
-                                        std::span<const vec3> points,
-                                        const ProbeValiditySettings& validity,
-                                        std::span<const Bounds3> volumes, int threads,
-                                        const std::atomic<bool>* cancel = nullptr) {
+std::vector<RelocatedPoint> relocateProbePoints(const Scene& scene, const Tracer& tracer,
+                                                std::span<const vec3> points,
+                                                const ProbeValiditySettings& settings,
+                                                std::span<const Bounds3> volumes, int threads,
+                                                const std::atomic<bool>* cancel) {
   std::vector<RelocatedPoint> out(points.size());
   ParallelOptions options;
   options.threads = threads;
@@ -217,11 +209,30 @@ std::vector<RelocatedPoint> relocateAll(const Scene& scene, const Tracer& tracer
       points.size(),
       [&](size_t begin, size_t end) {
         for (size_t i = begin; i < end; ++i)
-          out[i] = relocateProbePoint(scene, tracer, points[i], validity, volumes);
+          out[i] = relocateProbePoint(scene, tracer, points[i], settings, volumes);
       },
       options);
   return out;
 }
+
+std::vector<size_t> distinctValidPoints(std::span<const RelocatedPoint> points,
+                                        float minSurfaceDistance) {
+  const float cell = 0.5f * minSurfaceDistance;
+  std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
+  std::vector<size_t> kept;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].valid) continue;
+    const vec3 p = points[i].position;
+    if (cell > 0.0f && !seen.insert({int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)),
+                                     int64_t(std::floor(p.z / cell))})
+                            .second)
+      continue;
+    kept.push_back(i);
+  }
+  return kept;
+}
+
+namespace {
 
 // Cell-centred lattice of spacing about h over the volumes, relocated, invalid points dropped,
 // duplicates merged.
@@ -239,14 +250,10 @@ std::vector<vec3> validGrid(const Scene& scene, const Tracer& tracer,
           lattice.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
   }
   const std::vector<RelocatedPoint> moved =
-      relocateAll(scene, tracer, lattice, validity, volumes, threads);
-  std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
+      relocateProbePoints(scene, tracer, lattice, validity, volumes, threads);
   std::vector<vec3> out;
-  for (const RelocatedPoint& r : moved) {
-    if (!r.valid) continue;
-    if (!seen.insert(quantize(r.position, 0.5f * validity.minSurfaceDistance)).second) continue;
-    out.push_back(r.position);
-  }
+  for (size_t i : distinctValidPoints(moved, validity.minSurfaceDistance))
+    out.push_back(moved[i].position);
   return out;
 }
 
@@ -557,24 +564,16 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       raw.push_back(b.min + vec3(k) * cell0 / float(f));
   }
   if (isCancelled()) return Error{"cancelled"};
-  const std::vector<RelocatedPoint> relocated =
-      relocateAll(scene, tracer, raw, settings.validity, volumes, settings.threads, cancel);
+  const std::vector<RelocatedPoint> relocated = relocateProbePoints(
+      scene, tracer, raw, settings.validity, volumes, settings.threads, cancel);
   if (isCancelled()) return Error{"cancelled"};
   ProbePlacement result;
   std::vector<Candidate> candidates;
-  {
-    std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
-    for (size_t i = 0; i < raw.size(); ++i) {
-      const RelocatedPoint& r = relocated[i];
-      if (!r.valid) {
-        ++result.candidatesDropped;
-        continue;
-      }
-      if (!seen.insert(quantize(r.position, 0.5f * settings.validity.minSurfaceDistance)).second)
-        continue;
-      candidates.push_back(Candidate{r.position, raw[i], r.moved, r.why});
-      result.candidatesMoved += r.moved ? 1u : 0u;
-    }
+  for (const RelocatedPoint& r : relocated) result.candidatesDropped += r.valid ? 0u : 1u;
+  for (size_t i : distinctValidPoints(relocated, settings.validity.minSurfaceDistance)) {
+    const RelocatedPoint& r = relocated[i];
+    candidates.push_back(Candidate{r.position, raw[i], r.moved, r.why});
+    result.candidatesMoved += r.moved ? 1u : 0u;
   }
   result.candidates = uint32_t(candidates.size());
   if (candidates.size() < 4) return Error{"placement: fewer than 4 valid candidates"};

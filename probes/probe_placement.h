@@ -78,6 +78,19 @@ RelocatedPoint relocateProbePoint(const Scene& scene, const Tracer& tracer, vec3
                                   const ProbeValiditySettings& settings,
                                   std::span<const Bounds3> volumes = {});
 
+// relocateProbePoint for every point, in parallel; results in input order.
+std::vector<RelocatedPoint> relocateProbePoints(const Scene& scene, const Tracer& tracer,
+                                                std::span<const vec3> points,
+                                                const ProbeValiditySettings& settings,
+                                                std::span<const Bounds3> volumes, int threads,
+                                                const std::atomic<bool>* cancel = nullptr);
+
+// Indices (ascending) of the valid entries of `points`, leaving out any whose position falls
+// in the same cube of side minSurfaceDistance / 2 as an earlier kept one: relocation moves
+// neighbouring points onto the same spot. Nothing is merged when minSurfaceDistance <= 0.
+std::vector<size_t> distinctValidPoints(std::span<const RelocatedPoint> points,
+                                        float minSurfaceDistance);
+
 // The volumes where probes go: `volumes` when given, else the bounds of the static objects.
 std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds3> volumes);
 
