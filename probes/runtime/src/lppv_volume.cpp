@@ -8,11 +8,9 @@
 #include <bit>
 #include <cassert>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
-#include <filesystem>
-#include <system_error>
 
+#include "binary_file.h"
 #include "kiln/probe_runtime.h"
 
 namespace kiln {
@@ -349,49 +347,16 @@ Result<LppvVolume> parseLppvVolume(std::span<const uint8_t> bytes, std::string_v
 }
 
 Status writeLppvFile(const LppvVolume& v, const std::string& path) {
-  const std::vector<uint8_t> bytes = serializeLppvVolume(v);
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return Error{tmp + ": cannot open for writing"};
-  const size_t written = std::fwrite(bytes.data(), 1, bytes.size(), f);
-  const bool closed = std::fclose(f) == 0;
-  if (written != bytes.size() || !closed) {
-    std::remove(tmp.c_str());
-    return Error{tmp + ": write failed"};
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
-  }
-  return Status::success();
+  return runtime_detail::writeFileAtomically(path, serializeLppvVolume(v));
 }
 
 Result<LppvVolume> loadLppvFile(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return Error{path + ": cannot open"};
-  struct Closer {
-    std::FILE* f;
-    ~Closer() { std::fclose(f); }
-  } closer{f};
-  if (std::fseek(f, 0, SEEK_END) != 0) return Error{path + ": cannot seek"};
-  const long end = std::ftell(f);
-  if (end < 0) return Error{path + ": cannot tell size"};
-  std::rewind(f);
-  const uint64_t fileSize = uint64_t(end);
-  uint8_t header[kLppvFileHeaderSize] = {};
-  const size_t got = std::fread(header, 1, std::min<uint64_t>(fileSize, sizeof(header)), f);
-  // Check the resolution against the file length before allocating the payload.
-  Result<uint64_t> expected = checkHeader(header, got < sizeof(header) ? got : fileSize, path);
-  if (!expected) return Error{expected.error()};
-  std::vector<uint8_t> bytes(static_cast<size_t>(expected.value()));
-  std::memcpy(bytes.data(), header, sizeof(header));
-  const size_t rest = bytes.size() - sizeof(header);
-  if (std::fread(bytes.data() + sizeof(header), 1, rest, f) != rest) {
-    return Error{path + ": read failed"};
-  }
-  return parseLppvVolume(bytes, path);
+  Result<std::vector<uint8_t>> bytes = runtime_detail::readHeaderSizedFile(
+      path, kLppvFileHeaderSize, [&](const uint8_t* header, uint64_t available) {
+        return checkHeader(header, available, path);
+      });
+  if (!bytes) return Error{bytes.error()};
+  return parseLppvVolume(*bytes, path);
 }
 
 }  // namespace kiln

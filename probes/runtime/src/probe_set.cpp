@@ -7,11 +7,9 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
-#include <filesystem>
-#include <system_error>
 
+#include "binary_file.h"
 #include "kiln/probe_runtime.h"
 
 namespace kiln {
@@ -414,49 +412,16 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
 }
 
 Status writeProbeFile(const ProbeSet& set, const std::string& path) {
-  const std::vector<uint8_t> bytes = serializeProbeSet(set);
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return Error{tmp + ": cannot open for writing"};
-  const size_t written = std::fwrite(bytes.data(), 1, bytes.size(), f);
-  const bool closed = std::fclose(f) == 0;
-  if (written != bytes.size() || !closed) {
-    std::remove(tmp.c_str());
-    return Error{tmp + ": write failed"};
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Error{path + ": cannot rename from " + tmp + ": " + ec.message()};
-  }
-  return Status::success();
+  return runtime_detail::writeFileAtomically(path, serializeProbeSet(set));
 }
 
 Result<ProbeSet> loadProbeFile(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return Error{path + ": cannot open"};
-  struct Closer {
-    std::FILE* f;
-    ~Closer() { std::fclose(f); }
-  } closer{f};
-  if (std::fseek(f, 0, SEEK_END) != 0) return Error{path + ": cannot seek"};
-  const long end = std::ftell(f);
-  if (end < 0) return Error{path + ": cannot tell size"};
-  std::rewind(f);
-  const uint64_t fileSize = uint64_t(end);
-  uint8_t header[kProbeFileHeaderSize] = {};
-  const size_t got = std::fread(header, 1, std::min<uint64_t>(fileSize, sizeof(header)), f);
-  // Validate the counts against the file length before allocating the payload.
-  Result<uint64_t> expected = checkHeader(header, got < sizeof(header) ? got : fileSize, path);
-  if (!expected) return Error{expected.error()};
-  std::vector<uint8_t> bytes(static_cast<size_t>(expected.value()));
-  std::memcpy(bytes.data(), header, sizeof(header));
-  const size_t rest = bytes.size() - sizeof(header);
-  if (std::fread(bytes.data() + sizeof(header), 1, rest, f) != rest) {
-    return Error{path + ": read failed"};
-  }
-  return parseProbeSet(bytes, path);
+  Result<std::vector<uint8_t>> bytes = runtime_detail::readHeaderSizedFile(
+      path, kProbeFileHeaderSize, [&](const uint8_t* header, uint64_t available) {
+        return checkHeader(header, available, path);
+      });
+  if (!bytes) return Error{bytes.error()};
+  return parseProbeSet(*bytes, path);
 }
 
 }  // namespace kiln
