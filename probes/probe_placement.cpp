@@ -748,17 +748,19 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   std::vector<std::pair<float, std::vector<uint32_t>>> accepted = {{current->score, selected}};
   result.initialError = current->score;
   result.errorHistory.push_back(current->score);
-  auto takeSnapshots = [&] {
+  // Snapshot s, once the growing set has reached s probes: `bestSoFar`, the best-scoring set
+  // of at most s probes.
+  auto takeSnapshots = [&](const std::vector<uint32_t>& bestSoFar) {
     while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
       std::vector<vec3> pos;
-      for (uint32_t i : selected) pos.push_back(candidates[i].position);
+      for (uint32_t i : bestSoFar) pos.push_back(candidates[i].position);
       result.snapshots.push_back(std::move(pos));
-      result.snapshotCounts.push_back(uint32_t(selected.size()));
+      result.snapshotCounts.push_back(uint32_t(bestSoFar.size()));
       snapshotRequested.push_back(snapshotsLeft.front());
       snapshotsLeft.erase(snapshotsLeft.begin());
     }
   };
-  takeSnapshots();
+  takeSnapshots(selected);
 
   // The nearest candidate to p not in the set, preferring one that sees p (a probe on the
   // far side of a wall does not fix the error at p).
@@ -881,15 +883,7 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
         bestSelected = selected;
         result.errorHistory.push_back(best.score);
       }
-      // Snapshot s: the best set of at most s probes.
-      while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
-        std::vector<vec3> pos;
-        for (uint32_t i : bestSelected) pos.push_back(candidates[i].position);
-        result.snapshots.push_back(std::move(pos));
-        result.snapshotCounts.push_back(uint32_t(bestSelected.size()));
-        snapshotRequested.push_back(snapshotsLeft.front());
-      snapshotsLeft.erase(snapshotsLeft.begin());
-      }
+      takeSnapshots(bestSelected);
     }
     selected = bestSelected;
     current = best;
