@@ -16,6 +16,7 @@
 
 #include "lightmap/gltf_writer.h"
 #include "lightmap/ldr_encoding.h"
+#include "src/light_modes.h"
 
 namespace kiln {
 namespace {
@@ -93,19 +94,6 @@ double shortestDecimal(float v) {
   const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
   if (ec != std::errc()) return double(v);
   return std::strtod(std::string(buf, end).c_str(), nullptr);
-}
-
-// The light's extras.kiln.mode as the glTF file spells it.
-const char* lightModeName(LightMode mode) {
-  switch (mode) {
-    case LightMode::Mixed:
-      return "mixed";
-    case LightMode::Realtime:
-      return "realtime";
-    case LightMode::Baked:
-      break;
-  }
-  return "baked";
 }
 
 }  // namespace

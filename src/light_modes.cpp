@@ -26,6 +26,18 @@ const char* lightingModeName(LightingMode mode) {
   }
 }
 
+const char* lightModeName(LightMode mode) {
+  switch (mode) {
+    case LightMode::Mixed:
+      return "mixed";
+    case LightMode::Realtime:
+      return "realtime";
+    case LightMode::Baked:
+      break;
+  }
+  return "baked";
+}
+
 bool lightsOverlap(const Light& a, const Light& b) {
   if (a.type == LightType::Directional || b.type == LightType::Directional) return true;
   if (!(a.range > 0.0f) || !(b.range > 0.0f)) return true;  // unbounded influence

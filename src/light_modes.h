@@ -30,6 +30,8 @@ enum class LightingMode { BakedIndirect, Shadowmask, Subtractive };
 // "baked-indirect", "shadowmask" or "subtractive"; an error lists the valid names.
 Result<LightingMode> parseLightingMode(const std::string& name);
 const char* lightingModeName(LightingMode mode);
+// A light's mode as glTF's extras.kiln.mode spells it: "baked", "mixed" or "realtime".
+const char* lightModeName(LightMode mode);
 
 inline constexpr int kShadowmaskChannels = 4;
 

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "src/light_modes.h"
 #include "tools/kiln/cli_common.h"
 
 namespace kiln::cli {
@@ -34,18 +35,6 @@ const char* lightTypeName(LightType t) {
       return "point";
     case LightType::Spot:
       return "spot";
-  }
-  return "?";
-}
-
-const char* lightModeName(LightMode m) {
-  switch (m) {
-    case LightMode::Baked:
-      return "baked";
-    case LightMode::Mixed:
-      return "mixed";
-    case LightMode::Realtime:
-      return "realtime";
   }
   return "?";
 }
