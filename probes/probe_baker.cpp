@@ -146,19 +146,24 @@ glm::vec4 bakeProbeOcclusion(const Integrator& integrator, const LightModePlan& 
 }
 
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
-                      uint32_t lightSamples, const std::atomic<bool>* cancel) {
+                      uint32_t lightSamples, const std::atomic<bool>* cancel,
+                      const VisibilityMapSpec& visibility) {
   const Scene& scene = integrator.scene();
   const Tracer& tracer = integrator.tracer();
   ShL2Accumulator sum;
   const double weight = 4.0 * double(kPi) / double(rays);
   uint32_t backFaces = 0;
+  const bool withVisibility = visibility.resolution > 0;
+  VisibilityMapBuilder map(withVisibility ? visibility : VisibilityMapSpec{});
   for (uint32_t s = 0; s < rays; ++s) {
     // A probe can take seconds: let Ctrl-C through without waiting for it.
     if (cancel && (s & 4095u) == 4095u && cancel->load(std::memory_order_relaxed)) break;
     SampleStream stream(key, s);
     stream.setDimension(0);
     const vec3 dir = squareToUniformSphere(stream.get2D());
-    if (std::optional<Hit> hit = tracer.intersect(Ray{p, dir, 0.0f, kInfinity})) {
+    const std::optional<Hit> hit = tracer.intersect(Ray{p, dir, 0.0f, kInfinity});
+    if (withVisibility) map.add(dir, hit ? hit->t : kInfinity);
+    if (hit) {
       const Material& m = scene.materialOf(hit->object, hit->triangle);
       if (hit->backFace && !m.doubleSided && m.alphaMode != AlphaMode::Blend) {
         ++backFaces;
@@ -183,6 +188,7 @@ ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32
   ProbeSample out;
   out.sh = sum.result();
   out.validity = 1.0f - float(backFaces) / float(rays);
+  if (withVisibility) out.visibility = map.finish(tracer, p);
   return out;
 }
 
@@ -192,6 +198,14 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             ProbeBakeReport* report) {
   if (positions.empty()) return Error{"no probe positions"};
   if (settings.rays == 0) return Error{"rays per probe must be > 0"};
+  if (settings.visibilityResolution != 0 &&
+      (settings.visibilityResolution < kMinVisibilityResolution ||
+       settings.visibilityResolution > kMaxVisibilityResolution))
+    return Error{"visibility resolution must be 0 or in [" +
+                 std::to_string(kMinVisibilityResolution) + ", " +
+                 std::to_string(kMaxVisibilityResolution) + "]"};
+  if (!(settings.visibilityMaxDistance >= 0.0f) || !std::isfinite(settings.visibilityMaxDistance))
+    return Error{"visibility max distance must be a finite number >= 0"};
   for (size_t i = 0; i < positions.size(); ++i) {
     if (!isFinite(positions[i])) return Error{"positions[" + std::to_string(i) + "]: not finite"};
   }
@@ -219,6 +233,12 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   rep.integrator = integrator.settings();
   const size_t count = positions.size();
   std::vector<ProbeSample> samples(count);
+  std::vector<float> maxDistance;
+  if (settings.visibilityResolution > 0) {
+    maxDistance = settings.visibilityMaxDistance > 0.0f
+                      ? std::vector<float>(count, settings.visibilityMaxDistance)
+                      : visibilityMaxDistances(positions, set.cells);
+  }
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
   std::atomic<uint64_t> rays{0};
   ParallelOptions options;
@@ -232,8 +252,10 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
         const uint64_t before = Integrator::threadRayCount();
         for (size_t i = begin; i < end; ++i) {
           const uint64_t key = hashValues(settings.seed, i);
+          VisibilityMapSpec vis;
+          if (!maxDistance.empty()) vis = {settings.visibilityResolution, maxDistance[i]};
           samples[i] = bakeProbe(integrator, positions[i], key, settings.rays,
-                                 settings.lightSamples, cancel);
+                                 settings.lightSamples, cancel, vis);
           if (anyChannel) {
             occlusion[i] =
                 bakeProbeOcclusion(integrator, plan, positions[i], key, settings.occlusionSamples);
@@ -252,6 +274,14 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     set.validity[i] = samples[i].validity;
   }
   set.occlusion = std::move(occlusion);
+  if (settings.visibilityResolution > 0) {
+    set.visibility.resolution = settings.visibilityResolution;
+    set.visibility.maxDistance = maxDistance;
+    set.visibility.moments.reserve(count * set.visibility.valuesPerProbe());
+    for (const ProbeSample& ps : samples)
+      set.visibility.moments.insert(set.visibility.moments.end(), ps.visibility.begin(),
+                                    ps.visibility.end());
+  }
 
   // Validity: probes inside geometry get their valid neighbours' mean (from the raw bake).
   std::vector<char> valid(count);

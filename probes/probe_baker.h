@@ -29,6 +29,7 @@
 
 #include "kiln/probe_set.h"
 #include "probes/tetrahedralize.h"
+#include "probes/visibility_bake.h"
 #include "src/integrator.h"
 #include "src/light_modes.h"
 #include "src/progress.h"
@@ -42,6 +43,9 @@ namespace kiln {
 // Probes in enclosed rooms see a lot of multiply bounced light (a white Cornell box loses
 // ~5% of its irradiance at 8 bounces); Russian roulette keeps the long paths cheap.
 inline constexpr int kDefaultProbeBounces = 16;
+// Side of the per-probe visibility map a bake stores by default (docs/probes.md, "Leak-free
+// blending", says why).
+inline constexpr int32_t kDefaultVisibilityResolution = 16;
 
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
@@ -70,6 +74,13 @@ struct ProbeBakeSettings {
   // negative somewhere, with the weakest sinc^4 window that makes it >= 0; probes whose
   // irradiance is already >= 0 everywhere are left bit-for-bit unchanged.
   bool dering = true;
+  // Per-probe visibility for leak-free blending (kiln/probe_visibility.h): the side of each
+  // probe's octahedral depth-moment map, 0 = none (plain barycentric blending at run time).
+  // 16 x 16 (1 KiB per probe) by the leak-error chart in docs/probes.md.
+  int32_t visibilityResolution = kDefaultVisibilityResolution;
+  // Distance (metres) the moments are clamped to; 0 = per probe, the longest edge of its
+  // cells (visibilityMaxDistances).
+  float visibilityMaxDistance = 0.0f;
   int threads = 0;  // 0 = all cores
 };
 
@@ -112,13 +123,17 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
 
 // Radiance SH and validity of one probe at p (the per-probe step of bakeProbes, exposed for
 // tests): `key` keys its random numbers. Thread-safe. When `cancel` becomes true the loop
-// stops early (checked every 4096 rays) and the result is incomplete.
+// stops early (checked every 4096 rays) and the result is incomplete. With a visibility
+// resolution > 0 the same rays' first-hit distances also fill the probe's visibility map
+// (VisibilityMapBuilder).
 struct ProbeSample {
   ShL2Rgb sh;
   float validity = 1.0f;
+  std::vector<uint16_t> visibility;  // resolution^2 x 2 unorm16 moments, or empty
 };
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
-                      uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr);
+                      uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr,
+                      const VisibilityMapSpec& visibility = {});
 
 // Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
 // Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in

@@ -287,7 +287,7 @@ std::string parseError(const std::vector<uint8_t>& bytes) {
 
 TEST(ProbeOcclusionFile, Version2RoundTripAndVersion1StillLoads) {
   const ProbeSet s = cubeSetWithOcclusion();
-  const std::vector<uint8_t> v2 = serializeProbeSet(s);
+  const std::vector<uint8_t> v2 = serializeProbeSet(s, 2);
   uint32_t version = 0;
   std::memcpy(&version, v2.data() + 4, 4);
   EXPECT_EQ(version, 2u);
@@ -295,7 +295,7 @@ TEST(ProbeOcclusionFile, Version2RoundTripAndVersion1StillLoads) {
   ASSERT_TRUE(r.ok()) << r.error();
   EXPECT_EQ(r->occlusion, s.occlusion);
   EXPECT_EQ(r->occlusionLights, s.occlusionLights);
-  EXPECT_EQ(serializeProbeSet(*r), v2);
+  EXPECT_EQ(serializeProbeSet(*r, 2), v2);
 
   // Version 1: the same without the block; it loads with occlusion 1 and no channel lights.
   const std::vector<uint8_t> v1 = serializeProbeSet(s, 1);
@@ -478,7 +478,7 @@ TEST(ProbeOcclusionCli, LightingModeAndOcclusionOutput) {
       << log;
   ASSERT_EQ(test::runCommand(kiln + "export " + dir + "/a.kprobe", &log), 0) << log;
   Json x = Json::parse(log);
-  EXPECT_EQ(x["version"], 2);
+  EXPECT_EQ(x["version"], 3);
   EXPECT_EQ(x["occlusion"].size(), 4u);
   EXPECT_EQ(x["occlusionLights"], Json::array({0, -1, -1, -1}));
 

@@ -404,7 +404,7 @@ TEST(ProbeFile, HeaderDamageIsNamed) {
   std::vector<uint8_t> b = good;
   b[0] = 'X';
   EXPECT_NE(parseError(b).find("magic"), std::string::npos);
-  EXPECT_NE(patched(4, 3).find("version: file version 3"), std::string::npos);
+  EXPECT_NE(patched(4, 4).find("version: file version 4"), std::string::npos);
   EXPECT_NE(patched(8, 7).find("dimension"), std::string::npos);
   // Huge counts in a small file: rejected from the header, before any allocation.
   EXPECT_NE(patched(12, 1u << 25).find("size: file has"), std::string::npos);

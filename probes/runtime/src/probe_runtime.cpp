@@ -45,6 +45,7 @@ void finish(ProbeLocation& loc, int32_t cell, const int32_t* probes, const doubl
     loc.probes[k] = k < n ? probes[k] : probes[0];
     loc.weights[k] = k < n ? float(c[k] / sum) : 0.0f;
   }
+  loc.barycentric = loc.weights;
 }
 
 // ---- dimension 3 -------------------------------------------------------------------------
@@ -445,7 +446,8 @@ void locate1(const ProbeSet& s, glm::vec3 pf, ProbeLocation& loc) {
 
 }  // namespace
 
-ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
+ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                          const ProbeBlendSettings& blend) noexcept {
   ProbeLocation loc;
   if (s.cells.empty() || s.innerCellCount <= 0) return loc;
   switch (s.dimension) {
@@ -470,7 +472,31 @@ ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept
       loc.steps = 1;
     }
   }
+  weightByVisibility(s, p, loc, blend);
   return loc;
+}
+
+void weightByVisibility(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc,
+                        const ProbeBlendSettings& blend) noexcept {
+  loc.weights = loc.barycentric;
+  const ProbeVisibility& vis = s.visibility;
+  if (!blend.visibility || vis.empty() || loc.cell < 0) return;
+  // The biased point: off the surface along its normal (when the caller gives one).
+  const glm::vec3 q = p + blend.normal * blend.normalBias;
+  if (!(std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z))) return;
+  float w[4];
+  float sum = 0.0f;
+  for (int k = 0; k < 4; ++k) {
+    w[k] = loc.barycentric[k];
+    if (w[k] == 0.0f) continue;
+    const int32_t i = loc.probes[k];
+    w[k] *= probeVisibility(vis.probe(i), vis.resolution, vis.maxDistance[size_t(i)],
+                            q - s.positions[size_t(i)], blend);
+    sum += w[k];
+  }
+  // Every v >= kVisibilityFloor > 0 and the barycentric weights sum to 1, so sum > 0.
+  if (!(sum > 0.0f)) return;
+  for (int k = 0; k < 4; ++k) loc.weights[k] = w[k] / sum;
 }
 
 ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept {
@@ -501,42 +527,46 @@ glm::vec4 interpolateOcclusion(const ProbeSet& s, const ProbeLocation& loc) noex
   return glm::clamp(r, glm::vec4(0.0f), glm::vec4(1.0f));
 }
 
-glm::vec4 sampleOcclusion(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
-  return interpolateOcclusion(s, locateProbe(s, p, hint));
+glm::vec4 sampleOcclusion(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                          const ProbeBlendSettings& blend) noexcept {
+  return interpolateOcclusion(s, locateProbe(s, p, hint, blend));
 }
 
-ShL2Rgb sampleProbes(const ProbeSet& s, glm::vec3 p, int32_t hint) noexcept {
-  return interpolateProbes(s, locateProbe(s, p, hint));
+ShL2Rgb sampleProbes(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                     const ProbeBlendSettings& blend) noexcept {
+  return interpolateProbes(s, locateProbe(s, p, hint, blend));
 }
 
 void locateProbes(const ProbeSet& s, std::span<const glm::vec3> points,
-                  std::span<int32_t> hints, std::span<ProbeLocation> out) noexcept {
+                  std::span<int32_t> hints, std::span<ProbeLocation> out,
+                  const ProbeBlendSettings& blend) noexcept {
   const bool useHints = hints.size() == points.size();
   const size_t n = std::min(points.size(), out.size());
   for (size_t i = 0; i < n; ++i) {
-    out[i] = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    out[i] = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
     if (useHints) hints[i] = out[i].cell;
   }
 }
 
 void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
-                  std::span<ShL2Rgb> out) noexcept {
+                  std::span<ShL2Rgb> out, const ProbeBlendSettings& blend) noexcept {
   const bool useHints = hints.size() == points.size();
   const size_t n = std::min(points.size(), out.size());
   for (size_t i = 0; i < n; ++i) {
-    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
     if (useHints) hints[i] = loc.cell;
     out[i] = interpolateProbes(s, loc);
   }
 }
 
 void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
-                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion) noexcept {
+                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion,
+                  const ProbeBlendSettings& blend) noexcept {
   const bool useHints = hints.size() == points.size();
   const bool wantSh = sh.size() == points.size();
   const bool wantOcclusion = occlusion.size() == points.size();
   for (size_t i = 0; i < points.size(); ++i) {
-    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1);
+    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
     if (useHints) hints[i] = loc.cell;
     if (wantSh) sh[i] = interpolateProbes(s, loc);
     if (wantOcclusion) occlusion[i] = interpolateOcclusion(s, loc);

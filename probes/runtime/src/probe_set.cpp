@@ -54,7 +54,7 @@ struct Header {
   uint32_t version, dimension, probeCount, cellCount, innerCellCount;
   uint32_t gridSize[3];
   float gridMin[3], gridMax[3];
-  uint32_t reserved;
+  uint32_t visibilityResolution;  // "reserved" (0) before version 3
   uint64_t checksum;
 };
 
@@ -77,7 +77,7 @@ Header decodeHeader(const uint8_t* h) {
     r.gridMin[i] = readAt<float>(h + 36 + 4 * i);
     r.gridMax[i] = readAt<float>(h + 48 + 4 * i);
   }
-  r.reserved = readAt<uint32_t>(h + 60);
+  r.visibilityResolution = readAt<uint32_t>(h + 60);
   r.checksum = readAt<uint64_t>(h + 64);
   return r;
 }
@@ -115,13 +115,21 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
     gridCells *= hd.gridSize[i];
   }
   if (gridCells > kMaxGridCells) return fail(name, "gridSize: too many grid cells");
-  if (hd.reserved != 0) return fail(name, "reserved: must be 0");
+  const uint32_t vr = hd.visibilityResolution;
+  if (hd.version < 3 && vr != 0) return fail(name, "reserved: must be 0");
+  if (vr != 0 && (vr < uint32_t(kMinVisibilityResolution) ||
+                  vr > uint32_t(kMaxVisibilityResolution))) {
+    return fail(name, "visibilityResolution: " + std::to_string(vr) + " out of range (0, or " +
+                          std::to_string(kMinVisibilityResolution) + " to " +
+                          std::to_string(kMaxVisibilityResolution) + ")");
+  }
   const uint64_t outer = hd.cellCount - hd.innerCellCount;
   uint64_t expected = kProbeFileHeaderSize + hd.probeCount * kBytesPerProbe +
                       hd.cellCount * kBytesPerCell + outer * kBytesPerOuterCell + gridCells * 4;
   if (hd.version >= 2) {
     expected += kOcclusionLightsBytes + hd.probeCount * kOcclusionBytesPerProbe;
   }
+  if (vr != 0) expected += hd.probeCount * (4 + uint64_t(vr) * vr * 2 * 2);
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
                           " bytes but its header counts need " + std::to_string(expected) +
@@ -142,6 +150,46 @@ void take(const uint8_t*& p, std::vector<T>& v, size_t count) {
   v.resize(count);
   if (count) std::memcpy(v.data(), p, sizeof(T) * count);
   p += sizeof(T) * count;
+}
+
+// The visibility block: a resolution the format allows, one maxDistance and one map per probe,
+// and moments a distribution can have (mean and mean square in [0, 1], the mean square not
+// below the squared mean beyond unorm16 rounding).
+Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view name) {
+  if (v.resolution == 0) {
+    if (!v.maxDistance.empty() || !v.moments.empty())
+      return fail(name, "visibility: data without a resolution");
+    return Status::success();
+  }
+  if (v.resolution < kMinVisibilityResolution || v.resolution > kMaxVisibilityResolution) {
+    return fail(name, "visibilityResolution: " + std::to_string(v.resolution) +
+                          " out of range (0, or " + std::to_string(kMinVisibilityResolution) +
+                          " to " + std::to_string(kMaxVisibilityResolution) + ")");
+  }
+  if (v.maxDistance.size() != np)
+    return fail(name, "visibilityMaxDistance: size differs from positions");
+  if (v.moments.size() != np * v.valuesPerProbe())
+    return fail(name, "visibilityMoments: size differs from probeCount x resolution^2 x 2");
+  // Rounding each of mean and mean square to 1/65535 can put the mean square below the squared
+  // mean by at most about 3 steps; anything further is not a distribution.
+  constexpr double kTolerance = 4.0 / 65535.0;
+  const size_t texels = v.valuesPerProbe() / 2;
+  for (size_t i = 0; i < np; ++i) {
+    const float d = v.maxDistance[i];
+    if (!(std::isfinite(d) && d > 0.0f)) {
+      return fail(name, "visibilityMaxDistance[" + std::to_string(i) +
+                            "]: not a finite distance > 0");
+    }
+    for (size_t t = 0; t < texels; ++t) {
+      const double mean = v.moments[2 * (i * texels + t)] / 65535.0;
+      const double meanSquare = v.moments[2 * (i * texels + t) + 1] / 65535.0;
+      if (meanSquare + kTolerance < mean * mean) {
+        return fail(name, "visibilityMoments[" + std::to_string(i) + "][" + std::to_string(t) +
+                              "]: mean square below the squared mean");
+      }
+    }
+  }
+  return Status::success();
 }
 
 }  // namespace
@@ -206,7 +254,9 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
       for (int x = 0; x < n.x; ++x) {
         const glm::vec3 f = (glm::vec3(x, y, z) + 0.5f) / glm::vec3(n);
         const glm::vec3 p = lo + f * (hi - lo);
-        const ProbeLocation loc = locateProbe(set, p, hint);
+        ProbeBlendSettings cellOnly;
+        cellOnly.visibility = false;
+        const ProbeLocation loc = locateProbe(set, p, hint, cellOnly);
         hint = loc.cell >= 0 ? loc.cell : 0;
         seeds[size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * z)] = hint;
       }
@@ -232,6 +282,7 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
                             std::to_string(s.occlusionLights[c]) + " is not a light or -1");
     }
   }
+  if (Status v = validateVisibility(s.visibility, np, name); !v) return v;
   if (nc == 0) return fail(name, "cells: no cells");
   if (s.neighbours.size() != nc) return fail(name, "neighbours: size differs from cells");
   if (s.innerCellCount <= 0 || size_t(s.innerCellCount) > nc) {
@@ -331,6 +382,7 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
 std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
   std::vector<uint8_t> out(kProbeFileHeaderSize, 0);
   std::memcpy(out.data(), "KPRB", 4);
+  const bool withVisibility = version >= 3 && !s.visibility.empty();
   const uint32_t words[] = {version,
                             uint32_t(s.dimension),
                             uint32_t(s.positions.size()),
@@ -342,6 +394,8 @@ std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
   std::memcpy(out.data() + 4, words, sizeof(words));
   std::memcpy(out.data() + 36, &s.grid.min, 12);
   std::memcpy(out.data() + 48, &s.grid.max, 12);
+  const uint32_t visibilityResolution = withVisibility ? uint32_t(s.visibility.resolution) : 0u;
+  std::memcpy(out.data() + 60, &visibilityResolution, 4);
   put(out, s.positions.data(), s.positions.size());
   put(out, s.sh.data(), s.sh.size());
   put(out, s.validity.data(), s.validity.size());
@@ -358,6 +412,10 @@ std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
     } else {
       put(out, s.occlusion.data(), s.occlusion.size());
     }
+  }
+  if (withVisibility) {
+    put(out, s.visibility.maxDistance.data(), s.visibility.maxDistance.size());
+    put(out, s.visibility.moments.data(), s.visibility.moments.size());
   }
   uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), 64));
   sum = fnv1a64(std::span<const uint8_t>(out.data() + kProbeFileHeaderSize,
@@ -405,6 +463,11 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
   } else {
     // Version 1 predates probe occlusion: nothing is occluded.
     s.occlusion.assign(hd.probeCount, glm::vec4(1.0f));
+  }
+  if (hd.visibilityResolution != 0) {
+    s.visibility.resolution = int32_t(hd.visibilityResolution);
+    take(p, s.visibility.maxDistance, hd.probeCount);
+    take(p, s.visibility.moments, size_t(hd.probeCount) * s.visibility.valuesPerProbe());
   }
   Status st = validateProbeSet(s, name);
   if (!st) return Error{st.error()};

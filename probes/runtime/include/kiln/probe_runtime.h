@@ -4,6 +4,10 @@
 // the cell containing the point, crossing each time the face with the most negative
 // barycentric coordinate (Cupisz, GDC 2012); without a hint it starts from the seed grid.
 // Outside the hull the outer cells extrapolate continuously, so a lookup always succeeds.
+// When the set has per-probe visibility (ProbeSet::visibility) the barycentric weights are
+// multiplied by each probe's visibility of the point and renormalized
+// (kiln/probe_visibility.h), so light does not pass through walls between probes on both
+// sides of them; ProbeBlendSettings chooses plain or visibility-weighted blending.
 // Everything here reads a const ProbeSet: safe from many threads, no allocation per query.
 #pragma once
 
@@ -14,6 +18,7 @@
 #include <glm/glm.hpp>
 
 #include "kiln/probe_set.h"
+#include "kiln/probe_visibility.h"
 
 namespace kiln {
 
@@ -23,7 +28,8 @@ namespace kiln {
 struct ProbeLocation {
   int32_t cell = -1;                // pass back as the next hint
   std::array<int32_t, 4> probes{};  // indices into ProbeSet::positions / sh
-  std::array<float, 4> weights{};
+  std::array<float, 4> weights{};   // the blend's weights (visibility-weighted when used)
+  std::array<float, 4> barycentric{};  // the cell's own (barycentric) weights
   uint16_t steps = 0;               // cells visited by the walk (diagnostics)
   bool bruteForce = false;          // the walk gave up and a scan of all cells was used
 };
@@ -32,14 +38,22 @@ struct ProbeLocation {
 inline constexpr int kMaxWalkSteps = 4096;
 
 // Locates p (world space). `hint` is any cell index or -1; an out-of-range hint is ignored.
-// Returns cell = -1 only for an empty ProbeSet.
-ProbeLocation locateProbe(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+// Returns cell = -1 only for an empty ProbeSet. The cell is chosen exactly whatever the blend;
+// `blend` decides the weights (visibility-weighted by default when the set has visibility).
+ProbeLocation locateProbe(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
+                          const ProbeBlendSettings& blend = {}) noexcept;
+
+// Replaces location.weights by location.barycentric x each probe's visibility of p,
+// renormalized (plain barycentric when blend.visibility is false or the set has none).
+void weightByVisibility(const ProbeSet& set, glm::vec3 p, ProbeLocation& location,
+                        const ProbeBlendSettings& blend = {}) noexcept;
 
 // sum_k weights[k] * sh[probes[k]]: radiance SH at the located point.
 ShL2Rgb interpolateProbes(const ProbeSet& set, const ProbeLocation& location) noexcept;
 
 // Radiance SH at p (locate + interpolate).
-ShL2Rgb sampleProbes(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+ShL2Rgb sampleProbes(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
+                     const ProbeBlendSettings& blend = {}) noexcept;
 
 // sum_k weights[k] * occlusion[probes[k]]: the shadowmask occlusion of the 4 channels at the
 // located point (see ProbeSet), blended with the SH's weights (divided by their float sum, so
@@ -50,7 +64,8 @@ ShL2Rgb sampleProbes(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexce
 glm::vec4 interpolateOcclusion(const ProbeSet& set, const ProbeLocation& location) noexcept;
 
 // Occlusion at p (locate + interpolateOcclusion).
-glm::vec4 sampleOcclusion(const ProbeSet& set, glm::vec3 p, int32_t hint = -1) noexcept;
+glm::vec4 sampleOcclusion(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
+                          const ProbeBlendSettings& blend = {}) noexcept;
 
 // Irradiance E (not E / pi) for unit normal n from radiance SH (Ramamoorthi and Hanrahan
 // 2001; see src/sh.h).
@@ -60,13 +75,17 @@ inline glm::vec3 probeIrradiance(const ShL2Rgb& sh, glm::vec3 n) noexcept {
 
 // Batch forms. `hints` is empty or has points.size() entries: each entry is read as the hint
 // for its point and overwritten with the cell found. `out` must have points.size() entries.
+// `blend` applies to every point (its normal too; zero for object centres).
 void locateProbes(const ProbeSet& set, std::span<const glm::vec3> points,
-                  std::span<int32_t> hints, std::span<ProbeLocation> out) noexcept;
+                  std::span<int32_t> hints, std::span<ProbeLocation> out,
+                  const ProbeBlendSettings& blend = {}) noexcept;
 void sampleProbes(const ProbeSet& set, std::span<const glm::vec3> points,
-                  std::span<int32_t> hints, std::span<ShL2Rgb> out) noexcept;
+                  std::span<int32_t> hints, std::span<ShL2Rgb> out,
+                  const ProbeBlendSettings& blend = {}) noexcept;
 // Batch SH and occlusion together (one lookup per point): `sh` and `occlusion` are each empty
 // (not wanted) or have points.size() entries.
 void sampleProbes(const ProbeSet& set, std::span<const glm::vec3> points, std::span<int32_t> hints,
-                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion) noexcept;
+                  std::span<ShL2Rgb> sh, std::span<glm::vec4> occlusion,
+                  const ProbeBlendSettings& blend = {}) noexcept;
 
 }  // namespace kiln

@@ -17,6 +17,7 @@
 
 #include <glm/glm.hpp>
 
+#include "kiln/probe_visibility.h"
 #include "src/result.h"
 #include "src/sh.h"
 
@@ -71,6 +72,22 @@ struct ProbeSeedGrid {
 // unused channel, whose occlusion is always 1.
 inline constexpr int kProbeOcclusionChannels = 4;
 
+// Per-probe visibility for leak-free blending (kiln/probe_visibility.h): for probe i, an
+// octahedral map of resolution x resolution texels, each {mean, mean square} of the distance
+// to the first hit along the probe's bake rays, divided by maxDistance[i] (resp. its square)
+// and stored as unorm16 (value / 65535). resolution 0 = no visibility (plain blending).
+struct ProbeVisibility {
+  int32_t resolution = 0;
+  std::vector<float> maxDistance;  // per probe, metres (> 0)
+  std::vector<uint16_t> moments;   // probeCount x resolution^2 x 2, probe-major
+
+  bool empty() const { return resolution == 0; }
+  size_t valuesPerProbe() const { return 2 * size_t(resolution) * size_t(resolution); }
+  std::span<const uint16_t> probe(int32_t i) const {
+    return {moments.data() + size_t(i) * valuesPerProbe(), valuesPerProbe()};
+  }
+};
+
 struct ProbeSet {
   int32_t dimension = 3;
   std::vector<glm::vec3> positions;
@@ -84,6 +101,7 @@ struct ProbeSet {
   // Per probe shadowmask occlusion (see above); empty = 1 everywhere (no shadowmask lights).
   std::vector<glm::vec4> occlusion;
   std::array<int32_t, kProbeOcclusionChannels> occlusionLights{-1, -1, -1, -1};
+  ProbeVisibility visibility;  // empty = blend by barycentric weights alone
 
   int32_t probeCount() const { return int32_t(positions.size()); }
   int32_t cellCount() const { return int32_t(cells.size()); }
@@ -100,29 +118,36 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 
 // Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
 // symmetric, values finite, occlusion empty or one entry per probe in [0, 1], channel lights
-// >= -1. Messages read "<name>: <field>[i]: problem". Safe for untrusted
+// >= -1, visibility empty or a resolution in [kMinVisibilityResolution,
+// kMaxVisibilityResolution] with one finite maxDistance > 0 and one map per probe whose mean
+// squares are not below the squared means. Messages read "<name>: <field>[i]: problem". Safe for untrusted
 // data.
 Status validateProbeSet(const ProbeSet& set, std::string_view name);
 
-// .kprobe file, version 2, little-endian:
+// .kprobe file, version 3, little-endian:
 //   header (72 bytes): "KPRB", u32 version, u32 dimension, u32 probeCount, u32 cellCount,
-//     u32 innerCellCount, u32 gridSize[3], f32 gridMin[3], f32 gridMax[3], u32 reserved = 0,
+//     u32 innerCellCount, u32 gridSize[3], f32 gridMin[3], f32 gridMax[3],
+//     u32 visibilityResolution (version 3; 0 = no visibility; "reserved", 0, before),
 //     u64 checksum = FNV-1a 64 of header bytes [0, 64) followed by the whole payload;
 //   payload: f32 positions[probeCount][3], f32 sh[probeCount][9][3] (coefficient-major,
 //     RGB innermost), f32 validity[probeCount], i32 cells[cellCount][4],
 //     i32 neighbours[cellCount][4], f32 outerNormals[outerCount][3][3],
 //     f32 outerCubic[outerCount][4][4], i32 seeds[gridSize product],
-//     and from version 2 on: i32 occlusionLights[4] (scene light per shadowmask channel, -1
-//     unused), f32 occlusion[probeCount][4] (each in [0, 1]; unused channels 1);
+//     from version 2 on: i32 occlusionLights[4] (scene light per shadowmask channel, -1
+//     unused), f32 occlusion[probeCount][4] (each in [0, 1]; unused channels 1),
+//     from version 3 on, when visibilityResolution R > 0: f32 visibilityMaxDistance
+//     [probeCount], u16 visibilityMoments[probeCount][R * R][2] (see ProbeVisibility);
 //   where outerCount = cellCount - innerCellCount.
-// Version 1 is version 2 without the occlusion block; the reader accepts both and gives a
-// version 1 file occlusion 1 in every channel and no channel lights.
-inline constexpr uint32_t kProbeFileVersion = 2;
+// Version 1 is version 2 without the occlusion block, version 2 is version 3 without
+// visibility; the reader accepts all three and gives a version 1 file occlusion 1 in every
+// channel and no channel lights, and version 1 and 2 files no visibility (plain blending).
+inline constexpr uint32_t kProbeFileVersion = 3;
 inline constexpr uint32_t kProbeFileMinVersion = 1;
 inline constexpr size_t kProbeFileHeaderSize = 72;
 
 // Serialization (no validation: write what is given, so tests can craft bad files). `version`
-// 1 drops the occlusion (for readers that predate it); an empty `occlusion` is written as 1.
+// 1 drops the occlusion and 2 the visibility (for readers that predate them); an empty
+// `occlusion` is written as 1.
 std::vector<uint8_t> serializeProbeSet(const ProbeSet& set, uint32_t version = kProbeFileVersion);
 // Parses and validates a whole file image; `name` prefixes messages. Never allocates more than
 // the input size justifies. Safe for untrusted input.
