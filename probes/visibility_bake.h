@@ -40,9 +40,9 @@ class VisibilityMapBuilder {
   std::vector<double> sums_;  // per texel: weight, weight x s, weight x s^2
 };
 
-// Each probe's maxDistance for a topology: the longest edge of any cell it belongs to (every
+// Each probe's maxDistance for a topology: the longest of its own edges in any cell (every
 // point of an inner cell lies within that distance of each of the cell's probes, since
-// distance is convex and largest at a vertex). Probes in no cell (merged duplicates) and sets
+// distance to a probe is convex and so largest at one of the cell's vertices). Probes in no cell (merged duplicates) and sets
 // of one distinct position get the largest such value, or 1 m.
 std::vector<float> visibilityMaxDistances(std::span<const vec3> positions,
                                           std::span<const glm::ivec4> cells);

@@ -366,6 +366,20 @@ ProbeSet smallSet() {
   return build(pts, DelaunayBackend::TetGen);
 }
 
+// smallSet() with a visibility block (version 3): 4 x 4 maps of varied valid moments.
+ProbeSet smallSetWithVisibility() {
+  ProbeSet s = smallSet();
+  s.visibility.resolution = kMinVisibilityResolution;
+  s.visibility.maxDistance.assign(size_t(s.probeCount()), 1.5f);
+  s.visibility.moments.resize(size_t(s.probeCount()) * s.visibility.valuesPerProbe());
+  for (size_t t = 0; t < s.visibility.moments.size(); t += 2) {
+    const uint16_t mean = uint16_t(1000 + 97 * t);
+    s.visibility.moments[t] = mean;
+    s.visibility.moments[t + 1] = uint16_t(std::min(65535.0, mean * (mean / 65535.0) + 50.0));
+  }
+  return s;
+}
+
 std::string parseError(const std::vector<uint8_t>& bytes) {
   Result<ProbeSet> r = parseProbeSet(bytes, "bad.kprobe");
   return r.ok() ? std::string("(accepted)") : r.error();
@@ -374,11 +388,14 @@ std::string parseError(const std::vector<uint8_t>& bytes) {
 TEST(ProbeFile, EveryTruncationIsRejected) {
   const std::vector<uint8_t> bytes = serializeProbeSet(smallSet());
   ASSERT_TRUE(parseProbeSet(bytes, "ok").ok());
-  for (size_t n = 0; n < bytes.size(); ++n) {
-    const std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));
-    const std::string e = parseError(cut);
-    ASSERT_EQ(e.rfind("bad.kprobe: ", 0), 0u) << n << ": " << e;
-    EXPECT_TRUE(e.find("truncated") != std::string::npos) << n << ": " << e;
+  for (const std::vector<uint8_t>& file : {bytes, serializeProbeSet(smallSetWithVisibility())}) {
+    ASSERT_TRUE(parseProbeSet(file, "ok").ok());
+    for (size_t n = 0; n < file.size(); ++n) {
+      const std::vector<uint8_t> cut(file.begin(), file.begin() + long(n));
+      const std::string e = parseError(cut);
+      ASSERT_EQ(e.rfind("bad.kprobe: ", 0), 0u) << n << ": " << e;
+      EXPECT_TRUE(e.find("truncated") != std::string::npos) << n << ": " << e;
+    }
   }
   // And through the file reader, at a few offsets.
   const std::string path = tempPath("truncated.kprobe");
@@ -479,13 +496,15 @@ TEST(ProbeFile, BadContentIsNamed) {
 }
 
 TEST(ProbeFile, RandomCorruptionNeverCrashes) {
-  const std::vector<uint8_t> good = serializeProbeSet(smallSet());
   std::mt19937 rng(23);
-  for (int i = 0; i < 3000; ++i) {
-    std::vector<uint8_t> b = good;
-    const int flips = 1 + int(rng() % 4);
-    for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1u << (rng() % 8));
-    (void)parseProbeSet(b, "fuzz");  // must return, accepted or not
+  for (const ProbeSet& set : {smallSet(), smallSetWithVisibility()}) {
+    const std::vector<uint8_t> good = serializeProbeSet(set);
+    for (int i = 0; i < 3000; ++i) {
+      std::vector<uint8_t> b = good;
+      const int flips = 1 + int(rng() % 4);
+      for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1u << (rng() % 8));
+      (void)parseProbeSet(b, "fuzz");  // must return, accepted or not
+    }
   }
   EXPECT_FALSE(loadProbeFile(tempPath("does_not_exist.kprobe")).ok());
 }

@@ -1,7 +1,8 @@
 /* runtime_c_api_test.c: the C API (kiln_runtime.h) compiled as C99 and linked against
- * kiln_runtime alone. It writes a tiny .kprobe file byte by byte from the documented format
- * (version 1, two probes on a line: a dimension-1 set), then loads and queries it, and checks
- * that bad files and bad arguments come back as status codes with messages.
+ * kiln_runtime alone. It writes tiny .kprobe files byte by byte from the documented format
+ * (two probes on a line: a dimension-1 set; version 1, and version 3 with per-probe
+ * visibility), then loads and queries them, and checks that bad files and bad arguments come
+ * back as status codes with messages naming the field.
  * Usage: runtime_c_api_test <writable directory>. Returns 0 on success. */
 #include <math.h>
 #include <stdio.h>
@@ -41,21 +42,63 @@ static uint64_t fnv1a(const unsigned char* p, size_t n, uint64_t h) {
   return h;
 }
 
+/* What buildFile writes: version 1 (no occlusion, no visibility) or version 3 with the
+ * occlusion block (nothing occluded) and, when resolution > 0, visibility maps: probe 0 sees
+ * nothing (every texel at maxDistance), probe 1 has a wall kWall metres away in every
+ * direction. resolution is written to the header as given; the maps are written only for a
+ * resolution the buffer can hold, so an impossible one makes a file whose header is wrong. */
+typedef struct FileSpec {
+  uint32_t version;
+  uint32_t resolution;
+  float maxDistance[2];
+  int badMomentsTexel; /* >= 0: probe 1's texel with a mean square below its squared mean */
+} FileSpec;
+
+static const float kWall = 0.3f;     /* metres from probe 1 to its wall */
+static const float kDistance = 2.0f; /* maxDistance of a good file */
+
+static FileSpec plainSpec(void) {
+  FileSpec f;
+  f.version = 1;
+  f.resolution = 0;
+  f.maxDistance[0] = f.maxDistance[1] = kDistance;
+  f.badMomentsTexel = -1;
+  return f;
+}
+
+static FileSpec visibilitySpec(void) {
+  FileSpec f = plainSpec();
+  f.version = 3;
+  f.resolution = 4;
+  return f;
+}
+
+/* unorm16 of v in [0, 1], rounded to nearest (as the bake stores it). */
+static uint16_t unorm16(double v) { return (uint16_t)(v * 65535.0 + 0.5); }
+static void putU16(uint16_t v) {
+  buffer[used++] = (unsigned char)v;
+  buffer[used++] = (unsigned char)(v >> 8);
+}
+
+/* Probe 1's stored mean: kWall / maxDistance as unorm16. */
+static uint16_t wallMean(void) { return unorm16(kWall / kDistance); }
+
 /* Two probes at x = 0 and x = 2; probe 0 has L00 = (1, 2, 3), probe 1 has L00 = (3, 2, 1). */
-static size_t buildFile(void) {
+static size_t buildFile(const FileSpec* spec) {
   int i, k;
+  uint32_t t, texels;
   uint64_t sum;
   used = 0;
   memcpy(buffer, "KPRB", 4);
   used = 4;
-  putU32(1);            /* version */
+  putU32(spec->version);
   putU32(1);            /* dimension: colinear */
   putU32(2);            /* probeCount */
   putU32(1);            /* cellCount */
   putU32(1);            /* innerCellCount */
   for (i = 0; i < 3; ++i) putU32(0); /* no seed grid */
   for (i = 0; i < 6; ++i) putF32(0.0f);
-  putU32(0);            /* reserved */
+  putU32(spec->resolution); /* visibilityResolution (version 3), reserved = 0 before */
   used += 8;            /* checksum, filled below */
   putF32(0.0f); putF32(0.0f); putF32(0.0f);  /* positions */
   putF32(2.0f); putF32(0.0f); putF32(0.0f);
@@ -69,6 +112,26 @@ static size_t buildFile(void) {
   putF32(1.0f); putF32(1.0f);                /* validity */
   putI32(0); putI32(1); putI32(-1); putI32(-1);  /* cells */
   putI32(-1); putI32(-1); putI32(-1); putI32(-1); /* neighbours */
+  if (spec->version >= 2) {
+    for (i = 0; i < 4; ++i) putI32(-1);      /* occlusionLights: no channel used */
+    for (i = 0; i < 8; ++i) putF32(1.0f);    /* occlusion[probe][4] */
+  }
+  if (spec->version >= 3 && spec->resolution > 0 && spec->resolution <= 64) {
+    const uint16_t mean = wallMean();
+    const double m = mean / 65535.0;
+    texels = spec->resolution * spec->resolution;
+    putF32(spec->maxDistance[0]);
+    putF32(spec->maxDistance[1]);
+    for (t = 0; t < texels; ++t) { /* probe 0: open in every direction */
+      putU16(65535);
+      putU16(65535);
+    }
+    for (t = 0; t < texels; ++t) { /* probe 1: a wall at kWall, no spread */
+      const int bad = (int)t == spec->badMomentsTexel;
+      putU16(bad ? 30000 : mean);
+      putU16(bad ? 0 : unorm16(m * m));
+    }
+  }
   sum = fnv1a(buffer, 64, 14695981039346656037ULL);
   sum = fnv1a(buffer + 72, used - 72, sum);
   for (i = 0; i < 8; ++i) buffer[64 + i] = (unsigned char)(sum >> (8 * i));
@@ -82,6 +145,191 @@ static void writeFile(const char* path, const unsigned char* bytes, size_t n) {
     fwrite(bytes, 1, n, f);
     fclose(f);
   }
+}
+
+/* Loads `path` after writing the first n bytes of the file `spec` describes; returns the
+ * status, and checks that a failure leaves no handle. */
+static kiln_status loadSpec(const char* path, const FileSpec* spec, size_t cut) {
+  kiln_probes* probes = NULL;
+  kiln_status st;
+  const size_t n = buildFile(spec);
+  writeFile(path, buffer, n - cut);
+  st = kiln_probes_load(path, &probes);
+  if (st != KILN_OK) CHECK(probes == NULL);
+  kiln_probes_release(probes);
+  return st;
+}
+
+/* Probe 1's visibility of a point `distance` metres from it, beyond its wall, with the default
+ * blend (kiln/probe_visibility.h): d = (distance - distanceBias) / D against the stored mean
+ * m, sigma at its floor minSigma / D (the stored moments have no spread beyond unorm16
+ * rounding, 0.5 / 65535 < sigma^2), the Chebyshev bound cubed. */
+static double hiddenVisibility(double distance) {
+  const double sigma = 0.02 / kDistance;
+  const double d = (distance - 0.02) / kDistance;
+  const double excess = d - wallMean() / 65535.0;
+  const double c = sigma * sigma / (sigma * sigma + excess * excess);
+  return c * c * c;
+}
+
+/* The blend's weight of probe 1 at x, when probe 1's visibility there is v (probe 0 sees
+ * everything): barycentric weights (2 - x) / 2 and x / 2, probe 1's scaled by v, renormalized. */
+static double blendedWeight1(double x, double v) {
+  const double b0 = (2.0 - x) / 2.0, b1 = x / 2.0;
+  return b1 * v / (b0 + b1 * v);
+}
+
+static int within(double a, double b, double tolerance) { return fabs(a - b) <= tolerance; }
+
+static void testVisibility(const char* path) {
+  kiln_probes* probes = NULL;
+  kiln_probe_location loc, plain, single[2];
+  kiln_probe_blend blend, bad;
+  FileSpec spec = visibilitySpec();
+  /* x = 1.5 is 0.5 m from probe 1, beyond its wall at 0.3 m; x = 1.8 is 0.2 m from it, in
+   * front of the wall. */
+  const float behind[3] = {1.5f, 0.0f, 0.0f}, before[3] = {1.8f, 0.0f, 0.0f};
+  const float positions[6] = {1.5f, 0.0f, 0.0f, 1.8f, 0.0f, 0.0f};
+  float normals[6] = {0.0f, 0.0f, 0.0f, -1.0f, 0.0f, 0.0f};
+  int32_t hints[2] = {-1, -1};
+  kiln_probe_location batch[2];
+  float sh[27], batchSh[54];
+  double expected;
+  int k;
+
+  /* Defaults match kiln::ProbeBlendSettings. */
+  CHECK(kiln_probe_blend_defaults(&blend) == KILN_OK);
+  CHECK(blend.visibility == 1);
+  CHECK(blend.normal[0] == 0.0f && blend.normal[1] == 0.0f && blend.normal[2] == 0.0f);
+  CHECK(blend.normal_bias == 0.05f && blend.distance_bias == 0.02f && blend.min_sigma == 0.02f);
+  CHECK(kiln_probe_blend_defaults(NULL) == KILN_ERROR_INVALID_ARGUMENT);
+
+  /* A version 3 file with visibility loads and says so. */
+  writeFile(path, buffer, buildFile(&spec));
+  CHECK(kiln_probes_load(path, &probes) == KILN_OK);
+  if (!probes) {
+    fprintf(stderr, "%s\n", kiln_last_error());
+    ++failures;
+    return;
+  }
+  CHECK(kiln_probes_has_visibility(probes) == 1);
+  CHECK(kiln_probes_visibility_resolution(probes) == 4);
+  CHECK(kiln_probes_has_visibility(NULL) == 0 && kiln_probes_visibility_resolution(NULL) == 0);
+
+  /* Behind probe 1's wall: the plain blend leaks probe 1 in with its barycentric 0.75; the
+   * visibility blend gives it the Chebyshev weight, ~5e-6. */
+  blend.visibility = 0;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &plain) == KILN_OK);
+  CHECK(within(plain.weights[0], 0.25, 1e-6) && within(plain.weights[1], 0.75, 1e-6));
+  for (k = 0; k < 4; ++k) CHECK(plain.barycentric[k] == plain.weights[k]);
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, NULL, &loc) == KILN_OK);
+  expected = blendedWeight1(1.5, hiddenVisibility(0.5));
+  CHECK(expected > 1e-6 && expected < 1e-5);
+  CHECK(within(loc.weights[1], expected, 1e-4 * expected));
+  CHECK(within(loc.weights[0] + loc.weights[1], 1.0, 1e-6));
+  CHECK(loc.cell == plain.cell);
+  for (k = 0; k < 4; ++k) CHECK(loc.barycentric[k] == plain.barycentric[k]);
+  /* The SH is probe 0's, not the 1:3 mix. */
+  CHECK(kiln_probes_sample_sh(probes, &loc, sh) == KILN_OK);
+  CHECK(within(sh[0], 1.0, 1e-4) && within(sh[2], 3.0, 1e-4));
+  /* kiln_probes_locate uses the default blend: the same answer. */
+  CHECK(kiln_probes_locate(probes, behind, -1, &single[0]) == KILN_OK);
+  CHECK(memcmp(&single[0], &loc, sizeof(loc)) == 0);
+
+  /* In front of the wall probe 1 sees the point: the barycentric blend (0.1, 0.9). A surface
+   * normal facing probe 0 moves the tested point 0.3 m back, behind the wall. */
+  CHECK(kiln_probe_blend_defaults(&blend) == KILN_OK);
+  CHECK(kiln_probes_locate_blend(probes, before, -1, &blend, &loc) == KILN_OK);
+  CHECK(within(loc.weights[0], 0.1, 1e-6) && within(loc.weights[1], 0.9, 1e-6));
+  blend.normal[0] = -1.0f;
+  blend.normal_bias = 0.3f;
+  CHECK(kiln_probes_locate_blend(probes, before, -1, &blend, &single[1]) == KILN_OK);
+  expected = blendedWeight1(1.8, hiddenVisibility(0.5));
+  CHECK(within(single[1].weights[1], expected, 1e-4 * expected));
+
+  /* Batch with one normal per point: the same as single lookups, bit for bit. */
+  blend.normal[0] = 0.0f;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &single[0]) == KILN_OK);
+  CHECK(kiln_probes_sample_batch_blend(probes, 2, positions, normals, &blend, hints, batch,
+                                       batchSh) == KILN_OK);
+  CHECK(memcmp(&batch[0], &single[0], sizeof(loc)) == 0);
+  CHECK(memcmp(&batch[1], &single[1], sizeof(loc)) == 0);
+  CHECK(hints[0] == 0 && hints[1] == 0);
+  CHECK(within(batchSh[0], 1.0, 1e-4) && within(batchSh[27], 1.0, 1e-4));
+  /* Without normals every point uses blend.normal (zero here): x = 1.8 is seen again. */
+  CHECK(kiln_probes_sample_batch_blend(probes, 2, positions, NULL, &blend, NULL, batch, NULL) ==
+        KILN_OK);
+  CHECK(within(batch[1].weights[1], 0.9, 1e-6));
+
+  /* Bad blends: an error naming the field, and the output left alone. */
+  memset(&loc, 0x7f, sizeof(loc));
+  single[0] = loc;
+  kiln_probe_blend_defaults(&blend);
+  bad = blend;
+  bad.normal[1] = NAN;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &bad, &loc) == KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "kiln_probes_locate_blend") != NULL);
+  CHECK(strstr(kiln_last_error(), "blend.normal") != NULL);
+  CHECK(memcmp(&loc, &single[0], sizeof(loc)) == 0);
+  bad = blend;
+  bad.normal_bias = -0.01f;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &bad, &loc) == KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "blend.normal_bias") != NULL);
+  bad = blend;
+  bad.distance_bias = INFINITY;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &bad, &loc) == KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "blend.distance_bias") != NULL);
+  bad = blend;
+  bad.min_sigma = 0.0f;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &bad, &loc) == KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "blend.min_sigma") != NULL);
+  bad.min_sigma = NAN;
+  CHECK(kiln_probes_sample_batch_blend(probes, 2, positions, NULL, &bad, NULL, batch, NULL) ==
+        KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "kiln_probes_sample_batch_blend: blend.min_sigma") != NULL);
+  /* A non-finite per-point normal: named by index, nothing written. */
+  normals[4] = NAN;
+  hints[0] = hints[1] = -1;
+  CHECK(kiln_probes_sample_batch_blend(probes, 2, positions, normals, &blend, hints, batch, NULL) ==
+        KILN_ERROR_INVALID_ARGUMENT);
+  CHECK(strstr(kiln_last_error(), "normals[1]") != NULL);
+  CHECK(hints[0] == -1 && hints[1] == -1);
+  /* A good call clears the message. */
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &loc) == KILN_OK);
+  CHECK(kiln_last_error()[0] == '\0');
+  kiln_probes_release(probes);
+
+  /* Bad visibility blocks: rejected on load, the message naming the field. */
+  CHECK(loadSpec(path, &spec, 10) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "size") != NULL);
+  CHECK(strstr(kiln_last_error(), "truncated") != NULL);
+  spec.maxDistance[1] = NAN;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityMaxDistance[1]") != NULL);
+  spec.maxDistance[1] = kDistance;
+  spec.maxDistance[0] = 0.0f;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityMaxDistance[0]") != NULL);
+  spec.maxDistance[0] = kDistance;
+  spec.resolution = 3;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityResolution") != NULL);
+  spec.resolution = 65;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityResolution") != NULL);
+  spec.resolution = 100000;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityResolution") != NULL);
+  spec.resolution = 4;
+  spec.badMomentsTexel = 5;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "visibilityMoments[1][5]") != NULL);
+  /* A version 1 file may not use the word that holds the resolution. */
+  spec = plainSpec();
+  spec.resolution = 4;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "reserved") != NULL);
+  remove(path);
 }
 
 int main(int argc, char** argv) {
@@ -98,9 +346,11 @@ int main(int argc, char** argv) {
   kiln_probe_location locs[3];
   float shs[81];
   size_t n;
+  FileSpec spec;
 
   snprintf(path, sizeof(path), "%s/runtime_c_api_test.kprobe", argc > 1 ? argv[1] : ".");
-  n = buildFile();
+  spec = plainSpec();
+  n = buildFile(&spec);
   writeFile(path, buffer, n);
 
   /* Load and query. */
@@ -109,11 +359,14 @@ int main(int argc, char** argv) {
   if (!probes) return 1;
   CHECK(kiln_probes_count(probes) == 2);
   CHECK(kiln_probes_cell_count(probes) == 1);
+  CHECK(kiln_probes_has_visibility(probes) == 0);
+  CHECK(kiln_probes_visibility_resolution(probes) == 0);
   CHECK(kiln_probes_locate(probes, mid, -1, &loc) == KILN_OK);
   CHECK(loc.cell == 0);
   CHECK(loc.probes[0] == 0 && loc.probes[1] == 1);
   CHECK(fabsf(loc.weights[0] - 0.75f) < 1e-6f && fabsf(loc.weights[1] - 0.25f) < 1e-6f);
   CHECK(loc.weights[2] == 0.0f && loc.weights[3] == 0.0f);
+  CHECK(memcmp(loc.barycentric, loc.weights, sizeof(loc.weights)) == 0);
   CHECK(kiln_probes_sample_sh(probes, &loc, sh) == KILN_OK);
   CHECK(fabsf(sh[0] - 1.5f) < 1e-6f && fabsf(sh[1] - 2.0f) < 1e-6f && fabsf(sh[2] - 2.5f) < 1e-6f);
   CHECK(sh[3] == 0.0f && sh[26] == 0.0f);
@@ -153,7 +406,7 @@ int main(int argc, char** argv) {
   CHECK(kiln_probes_load(path, &probes) == KILN_ERROR_INVALID_FILE);
   CHECK(probes == NULL);
   CHECK(strstr(kiln_last_error(), "magic") != NULL);
-  n = buildFile();
+  n = buildFile(&spec);
   writeFile(path, buffer, n - 10);
   CHECK(kiln_probes_load(path, &probes) == KILN_ERROR_INVALID_FILE);
   CHECK(strstr(kiln_last_error(), "truncated") != NULL);
@@ -164,6 +417,8 @@ int main(int argc, char** argv) {
   remove(path);
   CHECK(kiln_probes_load(path, &probes) == KILN_ERROR_IO);
   CHECK(kiln_probes_load(NULL, &probes) == KILN_ERROR_INVALID_ARGUMENT);
+
+  testVisibility(path);
 
   if (failures) fprintf(stderr, "%d checks failed\n", failures);
   return failures ? 1 : 0;

@@ -3,6 +3,7 @@
 #include "kiln_runtime.h"
 
 #include <atomic>
+#include <cmath>
 #include <cstring>
 #include <new>
 #include <string>
@@ -51,7 +52,46 @@ void toC(const kiln::ProbeLocation& loc, kiln_probe_location* out) {
   for (int k = 0; k < 4; ++k) {
     out->probes[k] = loc.probes[k];
     out->weights[k] = loc.weights[k];
+    out->barycentric[k] = loc.barycentric[k];
   }
+}
+
+void blendToC(const kiln::ProbeBlendSettings& b, kiln_probe_blend* out) {
+  out->visibility = b.visibility ? 1 : 0;
+  for (int k = 0; k < 3; ++k) out->normal[k] = b.normal[k];
+  out->normal_bias = b.normalBias;
+  out->distance_bias = b.distanceBias;
+  out->min_sigma = b.minSigma;
+}
+
+bool finite3(const float* v) {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+// A blend from C is untrusted: NULL means the defaults; a field the visibility test cannot
+// use (NaN, infinite, a negative bias, a zero sigma) is an error naming it, set under the
+// name of the calling function.
+kiln_status blendFromC(const char* function, const kiln_probe_blend* in,
+                       kiln::ProbeBlendSettings& out) {
+  out = kiln::ProbeBlendSettings{};
+  if (!in) return KILN_OK;
+  auto bad = [&](const char* field, const char* what) {
+    return setError(KILN_ERROR_INVALID_ARGUMENT,
+                    std::string(function) + ": blend." + field + ": " + what);
+  };
+  if (!finite3(in->normal)) return bad("normal", "not finite");
+  if (!(std::isfinite(in->normal_bias) && in->normal_bias >= 0.0f))
+    return bad("normal_bias", "must be a finite distance >= 0");
+  if (!(std::isfinite(in->distance_bias) && in->distance_bias >= 0.0f))
+    return bad("distance_bias", "must be a finite distance >= 0");
+  if (!(std::isfinite(in->min_sigma) && in->min_sigma > 0.0f))
+    return bad("min_sigma", "must be a finite distance > 0");
+  out.visibility = in->visibility != 0;
+  out.normal = glm::vec3(in->normal[0], in->normal[1], in->normal[2]);
+  out.normalBias = in->normal_bias;
+  out.distanceBias = in->distance_bias;
+  out.minSigma = in->min_sigma;
+  return KILN_OK;
 }
 
 void shToFloats(const kiln::ShL2Rgb& sh, float* out) {
@@ -69,6 +109,59 @@ bool fromC(const kiln::ProbeSet& set, const kiln_probe_location* in, kiln::Probe
     loc.weights[k] = in->weights[k];
   }
   return true;
+}
+
+// kiln_probes_locate and kiln_probes_locate_blend (`blend` NULL = defaults); `function` names
+// the entry point in messages.
+kiln_status locate(const char* function, const kiln_probes* probes, const float* position,
+                   int32_t hint, const kiln_probe_blend* blend, kiln_probe_location* out) {
+  return guarded([&] {
+    if (!probes || !position || !out) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, std::string(function) + ": NULL argument");
+    }
+    kiln::ProbeBlendSettings settings;
+    if (kiln_status st = blendFromC(function, blend, settings); st != KILN_OK) return st;
+    toC(kiln::locateProbe(probes->set, glm::vec3(position[0], position[1], position[2]), hint,
+                          settings),
+        out);
+    return ok();
+  });
+}
+
+// kiln_probes_sample_batch and kiln_probes_sample_batch_blend (`normals` NULL = blend's normal
+// for every point).
+kiln_status sampleBatch(const char* function, const kiln_probes* probes, size_t count,
+                        const float* positions, const float* normals, const kiln_probe_blend* blend,
+                        int32_t* hints, kiln_probe_location* out_locations, float* out_sh) {
+  return guarded([&] {
+    if (!probes || (count > 0 && !positions)) {
+      return setError(KILN_ERROR_INVALID_ARGUMENT, std::string(function) + ": NULL argument");
+    }
+    kiln::ProbeBlendSettings settings;
+    if (kiln_status st = blendFromC(function, blend, settings); st != KILN_OK) return st;
+    // Every normal is checked first, so a bad one leaves hints and outputs untouched.
+    if (normals) {
+      for (size_t i = 0; i < count; ++i) {
+        if (!finite3(normals + 3 * i)) {
+          return setError(KILN_ERROR_INVALID_ARGUMENT, std::string(function) + ": normals[" +
+                                                           std::to_string(i) + "]: not finite");
+        }
+      }
+    }
+    for (size_t i = 0; i < count; ++i) {
+      const float* p = positions + 3 * i;
+      if (normals) {
+        const float* n = normals + 3 * i;
+        settings.normal = glm::vec3(n[0], n[1], n[2]);
+      }
+      const kiln::ProbeLocation loc = kiln::locateProbe(probes->set, glm::vec3(p[0], p[1], p[2]),
+                                                        hints ? hints[i] : -1, settings);
+      if (hints) hints[i] = loc.cell;
+      if (out_locations) toC(loc, out_locations + i);
+      if (out_sh) shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh + 27 * i);
+    }
+    return ok();
+  });
 }
 
 }  // namespace
@@ -107,16 +200,31 @@ uint32_t kiln_probes_cell_count(const kiln_probes* probes) {
   return probes ? uint32_t(probes->set.cellCount()) : 0u;
 }
 
-kiln_status kiln_probes_locate(const kiln_probes* probes, const float position[3], int32_t hint,
-                               kiln_probe_location* out) {
+int kiln_probes_has_visibility(const kiln_probes* probes) {
+  return probes && !probes->set.visibility.empty() ? 1 : 0;
+}
+
+uint32_t kiln_probes_visibility_resolution(const kiln_probes* probes) {
+  return probes ? uint32_t(probes->set.visibility.resolution) : 0u;
+}
+
+kiln_status kiln_probe_blend_defaults(kiln_probe_blend* blend) {
   return guarded([&] {
-    if (!probes || !position || !out) {
-      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_locate: NULL argument");
-    }
-    toC(kiln::locateProbe(probes->set, glm::vec3(position[0], position[1], position[2]), hint),
-        out);
+    if (!blend) return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probe_blend_defaults: NULL");
+    blendToC(kiln::ProbeBlendSettings{}, blend);
     return ok();
   });
+}
+
+kiln_status kiln_probes_locate(const kiln_probes* probes, const float position[3], int32_t hint,
+                               kiln_probe_location* out) {
+  return locate("kiln_probes_locate", probes, position, hint, nullptr, out);
+}
+
+kiln_status kiln_probes_locate_blend(const kiln_probes* probes, const float position[3],
+                                     int32_t hint, const kiln_probe_blend* blend,
+                                     kiln_probe_location* out) {
+  return locate("kiln_probes_locate_blend", probes, position, hint, blend, out);
 }
 
 kiln_status kiln_probes_sample_sh(const kiln_probes* probes, const kiln_probe_location* location,
@@ -183,20 +291,16 @@ kiln_status kiln_probes_irradiance(const float sh[27], const float normal[3], fl
 kiln_status kiln_probes_sample_batch(const kiln_probes* probes, size_t count,
                                      const float* positions, int32_t* hints,
                                      kiln_probe_location* out_locations, float* out_sh) {
-  return guarded([&] {
-    if (!probes || (count > 0 && !positions)) {
-      return setError(KILN_ERROR_INVALID_ARGUMENT, "kiln_probes_sample_batch: NULL argument");
-    }
-    for (size_t i = 0; i < count; ++i) {
-      const float* p = positions + 3 * i;
-      const kiln::ProbeLocation loc =
-          kiln::locateProbe(probes->set, glm::vec3(p[0], p[1], p[2]), hints ? hints[i] : -1);
-      if (hints) hints[i] = loc.cell;
-      if (out_locations) toC(loc, out_locations + i);
-      if (out_sh) shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh + 27 * i);
-    }
-    return ok();
-  });
+  return sampleBatch("kiln_probes_sample_batch", probes, count, positions, nullptr, nullptr, hints,
+                     out_locations, out_sh);
+}
+
+kiln_status kiln_probes_sample_batch_blend(const kiln_probes* probes, size_t count,
+                                           const float* positions, const float* normals,
+                                           const kiln_probe_blend* blend, int32_t* hints,
+                                           kiln_probe_location* out_locations, float* out_sh) {
+  return sampleBatch("kiln_probes_sample_batch_blend", probes, count, positions, normals, blend,
+                     hints, out_locations, out_sh);
 }
 
 const char* kiln_last_error(void) { return tlsError.c_str(); }
