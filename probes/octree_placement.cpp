@@ -109,9 +109,11 @@ std::vector<ivec3> octreeLeafCorners(const Scene& scene, vec3 origin, float side
 
 Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& tracer,
                                               const OctreePlacementSettings& settings) {
-  if (settings.level < 1 || settings.level > 10)
+  if (settings.cellSize <= 0.0f && (settings.level < 1 || settings.level > 10))
     return Error{"octree placement: level " + std::to_string(settings.level) +
                  " is outside 1..10"};
+  if (!(settings.cellSize >= 0.0f) || !std::isfinite(settings.cellSize))
+    return Error{"octree placement: cellSize must be a finite number >= 0"};
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
   Bounds3 box;
   for (const Bounds3& b : volumes) box.extend(b);
@@ -120,9 +122,19 @@ Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& 
   if (box.empty() || !(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
 
   OctreePlacement out;
-  out.cellSize = side / float(1 << settings.level);
+  int level = settings.level;
+  float rootSide = side;
+  if (settings.cellSize > 0.0f) {
+    level = 1;
+    while (level < 10 && settings.cellSize * float(1 << level) < side) ++level;
+    rootSide = settings.cellSize * float(1 << level);
+    if (rootSide < side)
+      return Error{"octree placement: cellSize " + std::to_string(settings.cellSize) +
+                   " m needs more than 1024 cells across the volumes"};
+  }
+  out.cellSize = rootSide / float(1 << level);
   const std::vector<ivec3> lattice =
-      octreeLeafCorners(scene, box.min, side, settings.level, &out.leafCells);
+      octreeLeafCorners(scene, box.min, rootSide, level, &out.leafCells);
   if (out.leafCells == 0) return Error{"octree placement: no static triangle in the volumes"};
 
   // Corners inside the volumes (a hair of tolerance: corners on a volume's face count).
@@ -169,7 +181,63 @@ Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& 
   for (size_t i : distinctValidPoints(judged, settings.validity.minSurfaceDistance))
     out.positions.push_back(judged[i].position);
   if (out.positions.empty())
-    return Error{"octree placement: no valid corner at level " + std::to_string(settings.level)};
+    return Error{"octree placement: no valid corner at level " + std::to_string(level)};
+  return out;
+}
+
+Result<std::vector<vec3>> octreeCornerPositions(const Scene& scene, const Tracer& tracer,
+                                                const OctreePlacementSettings& settings,
+                                                uint32_t count) {
+  if (count < 4) return Error{"octree placement: count must be at least 4"};
+  const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
+  Bounds3 box;
+  for (const Bounds3& b : volumes) box.extend(b);
+  const vec3 extent = box.extent();
+  const float side = std::max({extent.x, extent.y, extent.z});
+  if (box.empty() || !(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
+  OctreePlacementSettings s = settings;
+  auto place = [&](float cell) -> Result<std::vector<vec3>> {
+    s.cellSize = cell;
+    Result<OctreePlacement> r = octreeCornerPlacement(scene, tracer, s);
+    if (!r) return Error{r.error()};
+    return std::move(r->positions);
+  };
+  // The coarsest level with enough corners (fewer cells hold fewer corners, up to the lattice's
+  // phase), then the largest cell size between it and the next coarser level that still does.
+  float lo = 0.0f, hi = side;
+  std::vector<vec3> best;
+  for (int level = 1; level <= 10; ++level) {
+    const float cell = side / float(1 << level);
+    Result<std::vector<vec3>> r = place(cell);
+    if (!r) {
+      // A level with no triangle-touching cell or no valid corner: finer ones may have some.
+      hi = cell;
+      continue;
+    }
+    if (r->size() >= count) {
+      lo = cell;
+      best = std::move(*r);
+      break;
+    }
+    hi = cell;
+  }
+  if (best.size() < count)
+    return Error{"octree placement: fewer than " + std::to_string(count) +
+                 " valid corners at 1024 cells across the volumes"};
+  for (int i = 0; i < 14 && best.size() != count; ++i) {
+    const float mid = 0.5f * (lo + hi);
+    Result<std::vector<vec3>> r = place(mid);
+    if (r && r->size() >= count) {
+      lo = mid;
+      best = std::move(*r);
+    } else {
+      hi = mid;
+    }
+  }
+  std::vector<vec3> out;
+  out.reserve(count);
+  for (uint32_t k = 0; k < count; ++k)
+    out.push_back(best[size_t(uint64_t(k) * best.size() / count)]);
   return out;
 }
 

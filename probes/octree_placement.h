@@ -4,7 +4,8 @@
 // Probes are therefore dense on every surface and absent from open space, whatever the light.
 //
 // kiln uses it as a baseline for its own lighting-driven placement (probe_placement.h) in
-// `kiln chart` (docs/charts.md). Unlike Godot, which keeps corners that land inside walls,
+// `kiln chart` (docs/charts.md) and `kiln probes compare-placement` (at an exact probe count,
+// octreeCornerPositions). Unlike Godot, which keeps corners that land inside walls,
 // corners go through the same validity test and relocation as kiln's other placements
 // (relocateProbePoint), so that the comparison measures where probes are, not probes buried
 // in geometry.
@@ -29,6 +30,10 @@ struct OctreePlacementSettings {
   // 3, 4, 5, 6), laid from the box's minimum corner.
   std::vector<Bounds3> volumes;
   int level = 4;  // 1..10
+  // > 0: the finest cells' side in metres instead of `level` (the root is then the smallest
+  // cube of side cellSize x 2^L, L <= 10, that covers the volumes, laid from their minimum
+  // corner), so a probe count can be matched; Godot offers the levels only.
+  float cellSize = 0.0f;
   // true: corners inside geometry or too close to a surface are moved out as
   // relocateProbePoint does (dropped when that fails); false: they are dropped.
   bool relocate = true;
@@ -58,6 +63,15 @@ std::vector<glm::ivec3> octreeLeafCorners(const Scene& scene, vec3 origin, float
 // no static geometry, no valid corner. Deterministic at any thread count.
 Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& tracer,
                                               const OctreePlacementSettings& settings);
+
+// Godot-style placement with exactly `count` probes (>= 4), for comparisons at equal counts:
+// the largest finest-cell size (settings.cellSize; settings.level is ignored) whose valid
+// corners number at least `count` is searched (bisection between the levels around it), and
+// the surplus is removed evenly (every k-th in lattice order), as uniformGridPositions does.
+// Errors: as octreeCornerPlacement, or fewer than `count` valid corners at 1024 cells per side.
+Result<std::vector<vec3>> octreeCornerPositions(const Scene& scene, const Tracer& tracer,
+                                                const OctreePlacementSettings& settings,
+                                                uint32_t count);
 
 // Separating-axis test of triangle (a, b, c) against the axis-aligned box centre +- half
 // (closed: touching counts). Exposed for tests.

@@ -237,7 +237,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   if (settings.visibilityResolution > 0) {
     maxDistance = settings.visibilityMaxDistance > 0.0f
                       ? std::vector<float>(count, settings.visibilityMaxDistance)
-                      : visibilityMaxDistances(positions, set.cells);
+                      : visibilityMaxDistances(positions, scene.bounds);
   }
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
   std::atomic<uint64_t> rays{0};

@@ -322,7 +322,8 @@ float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, flo
 }
 
 FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
-                             std::span<const ShL2Rgb> truth, float floor, int threads) {
+                             std::span<const ShL2Rgb> truth, float floor, int threads,
+                             const ProbeBlendSettings& blend) {
   FieldError out;
   out.perPoint.assign(points.size(), 0.0f);
   ParallelOptions options;
@@ -333,27 +334,45 @@ FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
       [&](size_t begin, size_t end) {
         int32_t hint = -1;
         for (size_t i = begin; i < end; ++i) {
-          const ProbeLocation loc = locateProbe(set, points[i], hint);
+          const ProbeLocation loc = locateProbe(set, points[i], hint, blend);
           hint = loc.cell;
           out.perPoint[i] = relativeIrradianceError(truth[i], interpolateProbes(set, loc), floor);
         }
       },
       options);
+  return summarizeFieldError(std::move(out.perPoint));
+}
+
+FieldError summarizeFieldError(std::vector<float> perPoint) {
+  FieldError out;
   double sum = 0.0;
-  for (float e : out.perPoint) {
+  for (float e : perPoint) {
     sum += e;
     out.max = std::max(out.max, e);
   }
-  out.mean = points.empty() ? 0.0f : float(sum / double(points.size()));
-  out.p95 = percentile(out.perPoint, 0.95);
+  out.mean = perPoint.empty() ? 0.0f : float(sum / double(perPoint.size()));
+  out.p95 = percentile(perPoint, 0.95);
+  out.perPoint = std::move(perPoint);
   return out;
 }
 
 std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
                                  std::span<const vec3> points, const ProbeBakeSettings& settings,
-                                 Progress* progress, const std::atomic<bool>* cancel) {
+                                 Progress* progress, const std::atomic<bool>* cancel,
+                                 ProbeVisibility* visibility) {
   const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, settings));
   std::vector<ShL2Rgb> out(points.size());
+  const bool withVisibility = visibility && settings.visibilityResolution > 0;
+  if (visibility) {
+    *visibility = ProbeVisibility{};
+    if (withVisibility) {
+      visibility->resolution = settings.visibilityResolution;
+      visibility->maxDistance = settings.visibilityMaxDistance > 0.0f
+                                    ? std::vector<float>(points.size(), settings.visibilityMaxDistance)
+                                    : visibilityMaxDistances(points, scene.bounds);
+      visibility->moments.assign(points.size() * visibility->valuesPerProbe(), 0);
+    }
+  }
   ParallelOptions options;
   options.threads = settings.threads;
   options.grain = 4;
@@ -362,10 +381,17 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
   const bool done = parallelFor(
       points.size(),
       [&](size_t begin, size_t end) {
-        for (size_t i = begin; i < end; ++i)
-          out[i] = bakeProbe(integrator, points[i], hashValues(settings.seed, i), settings.rays,
-                             settings.lightSamples, cancel)
-                       .sh;
+        for (size_t i = begin; i < end; ++i) {
+          VisibilityMapSpec spec;
+          if (withVisibility) spec = {visibility->resolution, visibility->maxDistance[i]};
+          ProbeSample sample = bakeProbe(integrator, points[i], hashValues(settings.seed, i),
+                                         settings.rays, settings.lightSamples, cancel, spec);
+          out[i] = sample.sh;
+          if (withVisibility)
+            std::copy(sample.visibility.begin(), sample.visibility.end(),
+                      visibility->moments.begin() +
+                          ptrdiff_t(i * visibility->valuesPerProbe()));
+        }
       },
       options);
   if (!done || (cancel && cancel->load())) return {};
@@ -476,7 +502,8 @@ std::vector<ivec3> octreeCorners(const Scene& scene, const Tracer& tracer,
 }  // namespace
 
 float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
-                          const std::array<const ShL2Rgb*, 4>& sh, float floor) {
+                          const std::array<const ShL2Rgb*, 4>& sh, float floor,
+                          const CellProbeMaps& maps) {
   bool blocked = false;
   for (int a = 0; a < 4 && !blocked; ++a)
     for (int b = a + 1; b < 4 && !blocked; ++b)
@@ -498,20 +525,32 @@ float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
       w[a] = w[b] = 0.4f;
       pattern.push_back(w);
     }
+  const ProbeBlendSettings runtimeBlend;  // what a lookup without a normal uses
   double sum = 0.0;
   for (const vec4& w : pattern) {
     const vec3 x = w[0] * p[0] + w[1] * p[1] + w[2] * p[2] + w[3] * p[3];
-    ShL2Rgb blend, seen;
+    ShL2Rgb seen;
     float seenWeight = 0.0f;
+    std::array<float, 4> runtime{};
+    float runtimeSum = 0.0f;
     for (size_t v = 0; v < 4; ++v) {
-      blend += *sh[v] * w[int(v)];
       if (!tracer.occluded(Ray{x, p[v] - x, 1e-4f, 1.0f - 1e-4f})) {
         seen += *sh[v] * w[int(v)];
         seenWeight += w[int(v)];
       }
+      // The runtime's weight (weightByVisibility): barycentric x the probe's visibility.
+      runtime[v] = w[int(v)];
+      if (maps.resolution > 0)
+        runtime[v] *= probeVisibility(maps.moments[v], maps.resolution, maps.maxDistance[v],
+                                      x - p[v], runtimeBlend);
+      runtimeSum += runtime[v];
     }
     // Inside geometry (sees no probe) or unaffected (sees all): no leak at this point.
     if (seenWeight <= 0.0f || seenWeight >= 0.999f) continue;
+    // Plain barycentric weights already sum to 1 (the pattern's do).
+    const float scale = maps.resolution > 0 ? 1.0f / runtimeSum : 1.0f;
+    ShL2Rgb blend;
+    for (size_t v = 0; v < 4; ++v) blend += *sh[v] * (runtime[v] * scale);
     sum += relativeIrradianceError(seen * (1.0f / seenWeight), blend, floor);
   }
   return float(double(volume) * sum / double(pattern.size()));
@@ -533,6 +572,15 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
     return Error{"placement: maxDepth must be in [0, 6]"};
   if (settings.candidateRays == 0 || settings.checkPoints == 0)
     return Error{"placement: candidateRays and checkPoints must be positive"};
+  const int32_t visibilityResolution = settings.bake.visibilityResolution;
+  if (visibilityResolution != 0 && (visibilityResolution < kMinVisibilityResolution ||
+                                    visibilityResolution > kMaxVisibilityResolution))
+    return Error{"placement: bake.visibilityResolution must be 0 or in [" +
+                 std::to_string(kMinVisibilityResolution) + ", " +
+                 std::to_string(kMaxVisibilityResolution) + "]"};
+  if (!(settings.bake.visibilityMaxDistance >= 0.0f) ||
+      !std::isfinite(settings.bake.visibilityMaxDistance))
+    return Error{"placement: bake.visibilityMaxDistance must be a finite number >= 0"};
   for (size_t i = 0; i < settings.volumes.size(); ++i) {
     const Bounds3& b = settings.volumes[i];
     if (!isFinite(b.min) || !isFinite(b.max) || volumeOf(b) <= 0.0f)
@@ -584,11 +632,12 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   ProbeBakeSettings candidateBake = bake;
   candidateBake.seed = hashValues(settings.seed, kCandidateTag);
   std::vector<ShL2Rgb> candidateSh;
+  ProbeVisibility candidateVisibility;  // resolution 0 when visibility is off
   {
     Progress progress("placement candidates", candidatePositions.size(), "probes",
                       settings.showProgress);
-    candidateSh =
-        bakePointSh(scene, tracer, candidatePositions, candidateBake, &progress, cancel);
+    candidateSh = bakePointSh(scene, tracer, candidatePositions, candidateBake, &progress, cancel,
+                              &candidateVisibility);
     progress.finish();
   }
   if (candidateSh.empty()) return Error{"cancelled"};
@@ -608,7 +657,8 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
 
   // 3. Refinement over index sets into `candidates`. A set's score is its mean check error
   // plus its leak estimate (cellLeakVolumeError summed over the inner cells, divided by the
-  // volumes' total): the expected error the check points miss in cells that span walls.
+  // volumes' total): the expected error the check points miss in cells that span walls. Both
+  // blend as the runtime will: with the candidates' visibility maps when they have them.
   std::string topologyError;
   struct Scored {
     FieldError field;
@@ -640,11 +690,18 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
           for (size_t m = begin; m < end; ++m) {
             std::array<vec3, 4> p;
             std::array<const ShL2Rgb*, 4> sh;
+            CellProbeMaps maps;
+            maps.resolution = candidateVisibility.resolution;
             for (size_t v = 0; v < 4; ++v) {
-              p[v] = candidates[missing[m][v]].position;
-              sh[v] = &candidateSh[missing[m][v]];
+              const uint32_t c = missing[m][v];
+              p[v] = candidates[c].position;
+              sh[v] = &candidateSh[c];
+              if (maps.resolution > 0) {
+                maps.moments[v] = candidateVisibility.probe(int32_t(c));
+                maps.maxDistance[v] = candidateVisibility.maxDistance[c];
+              }
             }
-            computed[m] = cellLeakVolumeError(tracer, p, sh, floor);
+            computed[m] = cellLeakVolumeError(tracer, p, sh, floor, maps);
           }
         },
         options);
@@ -666,6 +723,17 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       return std::nullopt;
     }
     for (size_t k = 0; k < sel.size(); ++k) set->sh[k] = candidateSh[sel[k]];
+    if (!candidateVisibility.empty()) {
+      ProbeVisibility& vis = set->visibility;
+      vis.resolution = candidateVisibility.resolution;
+      vis.maxDistance.reserve(sel.size());
+      vis.moments.reserve(sel.size() * vis.valuesPerProbe());
+      for (uint32_t i : sel) {
+        vis.maxDistance.push_back(candidateVisibility.maxDistance[i]);
+        const std::span<const uint16_t> m = candidateVisibility.probe(int32_t(i));
+        vis.moments.insert(vis.moments.end(), m.begin(), m.end());
+      }
+    }
     Scored out;
     out.field = measureFieldError(*set, checks, truth, floor, settings.threads);
     if (settings.leakWeight > 0.0f) out.leak = leakOf(*set, sel);
@@ -829,14 +897,23 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
       if (!spawned.empty()) {
         ProbeBakeSettings spawnBake = candidateBake;
         spawnBake.seed = hashValues(settings.seed, kSpawnTag, result.rounds);
+        ProbeVisibility spawnedVisibility;
         const std::vector<ShL2Rgb> sh =
-            bakePointSh(scene, tracer, spawned, spawnBake, nullptr, cancel);
+            bakePointSh(scene, tracer, spawned, spawnBake, nullptr, cancel, &spawnedVisibility);
         if (sh.empty()) break;  // cancelled
         for (size_t k = 0; k < spawned.size(); ++k) {
           candidates.push_back(Candidate{spawned[k], spawned[k], false, ""});
           candidateSh.push_back(sh[k]);
           inSet.push_back(0);
           rejected.push_back(0);
+        }
+        if (!candidateVisibility.empty()) {
+          candidateVisibility.maxDistance.insert(candidateVisibility.maxDistance.end(),
+                                                 spawnedVisibility.maxDistance.begin(),
+                                                 spawnedVisibility.maxDistance.end());
+          candidateVisibility.moments.insert(candidateVisibility.moments.end(),
+                                             spawnedVisibility.moments.begin(),
+                                             spawnedVisibility.moments.end());
         }
         result.spawned += uint32_t(spawned.size());
       }

@@ -14,10 +14,13 @@
 //    from a coarse lattice snapped to candidates, rounds add the candidates nearest (and
 //    visible from) the check points where the tetrahedral interpolation (Cupisz 2012) is
 //    worst, and a prune pass removes probes whose removal does not raise the error. A set's
-//    score is its mean
-//    check error plus a leak estimate of its cells that span walls (cellLeakVolumeError);
-//    picks that would bring more leak than one probe's share are dropped, and the
-//    best-scoring set is kept, so the score never increases.
+//    score is its mean check error plus a leak estimate of its cells that span walls
+//    (cellLeakVolumeError); picks that would bring more leak than one probe's share are
+//    dropped, and the best-scoring set is kept, so the score never increases.
+// The cheap bakes also record each probe's visibility map (kiln/probe_visibility.h), so both
+// the check error and the leak estimate judge a set by the visibility-weighted blend the
+// runtime returns; with ProbeBakeSettings::visibilityResolution = 0 they judge the plain
+// barycentric blend (for probes that will be baked without visibility).
 #pragma once
 
 #include <array>
@@ -29,6 +32,7 @@
 #include <vector>
 
 #include "kiln/probe_set.h"
+#include "kiln/probe_visibility.h"
 #include "probes/probe_baker.h"
 #include "src/math.h"
 #include "src/progress.h"
@@ -135,7 +139,12 @@ struct ProbePlacementSettings {
   // the error-versus-count curve. Growth batches stop at these counts.
   std::vector<uint32_t> snapshotCounts;
   uint64_t seed = 0;
-  ProbeBakeSettings bake;  // integrator settings of the cheap bakes (rays are candidateRays)
+  // Integrator settings of the cheap bakes (rays are candidateRays). bake.visibilityResolution
+  // (default 16, as bakeProbes) > 0: every candidate and spawned probe also records a
+  // visibility map, and sets are scored with the visibility-weighted blend; 0: plain blend.
+  // The maps' maxDistance is bake.visibilityMaxDistance when > 0, else per point, as
+  // bakeProbes sets it (visibilityMaxDistances over the scene's bounds).
+  ProbeBakeSettings bake;
   int threads = 0;
   bool showProgress = false;  // progress lines on stderr for the bakes
 };
@@ -190,29 +199,52 @@ struct FieldError {
   float mean = 0.0f, p95 = 0.0f, max = 0.0f;
   std::vector<float> perPoint;
 };
-// `set` must be complete (topology + SH). `truth[i]` is the SH baked at points[i].
+// Mean, 95th percentile (nearest rank) and max of per-point errors (kept in perPoint).
+FieldError summarizeFieldError(std::vector<float> perPoint);
+// `set` must be complete (topology + SH). `truth[i]` is the SH baked at points[i]. The field
+// is looked up as the runtime does (locateProbe with `blend`: visibility-weighted when the set
+// has visibility maps and blend.visibility is true, plain barycentric otherwise).
 FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
-                             std::span<const ShL2Rgb> truth, float floor, int threads = 0);
+                             std::span<const ShL2Rgb> truth, float floor, int threads = 0,
+                             const ProbeBlendSettings& blend = {});
 
 // SH baked at each point with bakeProbe (the probe bake's estimator), keyed by
-// hashValues(seed, i). Used as ground truth at check points.
+// hashValues(seed, i). Used as ground truth at check points and for placement's candidates.
+// When `visibility` is given and settings.visibilityResolution > 0, the same rays also fill
+// each point's visibility map (resolution; maxDistance settings.visibilityMaxDistance when
+// > 0, else visibilityMaxDistances over the scene's bounds; moments point-major: the layout of
+// ProbeSet::visibility); otherwise *visibility is left empty (resolution 0).
 // Returns an empty vector when cancelled.
 std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
                                  std::span<const vec3> points, const ProbeBakeSettings& settings,
                                  Progress* progress = nullptr,
-                                 const std::atomic<bool>* cancel = nullptr);
+                                 const std::atomic<bool>* cancel = nullptr,
+                                 ProbeVisibility* visibility = nullptr);
+
+// The visibility maps of a tetrahedron's four probes (kiln/probe_visibility.h): each probe's
+// moments (resolution^2 x 2 unorm16) and maxDistance. resolution 0 = no maps.
+struct CellProbeMaps {
+  int32_t resolution = 0;
+  std::array<std::span<const uint16_t>, 4> moments{};
+  std::array<float, 4> maxDistance{};
+};
 
 // Leak estimate of one tetrahedron (corners p, baked SH sh): the error its blending makes at
 // points that cannot see all four of its probes (a wall runs through it), times its volume. At
 // 11 fixed points inside the cell (centroid, towards each corner, towards each edge), the
-// probes visible from the point stand in for the truth there (their weights renormalized) and
-// the blend of all four is what the runtime returns; the mean relativeIrradianceError between
-// the two, times the cell's volume (m^3). Zero for cells with no edge blocked by geometry, and
-// when the four probes agree. Check points find such errors only where they happen to fall; a
-// sliver that reaches from a sunlit probe into a dark room holds few of them but can dominate
-// the mean error. Placement adds the sum over inner cells / the volumes' total to its score.
+// probes visible from the point (rays from it) stand in for the truth there (their barycentric
+// weights renormalized), against what the runtime returns: the blend of all four, weighted by
+// their visibility of the point when `maps` has maps (weightByVisibility with the default
+// ProbeBlendSettings: no normal), plain barycentric otherwise. The mean
+// relativeIrradianceError between the two, times the cell's volume (m^3). Zero for cells with
+// no edge blocked by geometry, when the four probes agree, and where the maps already hide
+// the probes the point cannot see. Check points find such errors only where they happen to
+// fall; a sliver that reaches from a sunlit probe into a dark room holds few of them but can
+// dominate the mean error. Placement adds the sum over inner cells / the volumes' total to its
+// score.
 float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
-                          const std::array<const ShL2Rgb*, 4>& sh, float floor);
+                          const std::array<const ShL2Rgb*, 4>& sh, float floor,
+                          const CellProbeMaps& maps = {});
 
 // Leak exposure of a topology: inner cells with at least one edge blocked by geometry (an
 // opaque or translucent surface between two of its probes), which can blend light through it.

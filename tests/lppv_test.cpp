@@ -614,5 +614,47 @@ TEST(LppvCli, WritesTheThreeOutputs) {
   std::filesystem::remove_all(dir);
 }
 
+// --blend on two_rooms' 36 scene probes: a small volume in dark room B, 0.1-0.6 m from the
+// wall whose other side room A's sun lights. Filled plainly it takes room A's light through
+// the cells that span the wall (the query of docs/probes.md at (4.45, 0.3, 1.5), inside this
+// box, gives ~1.7 lux plainly and ~0.003 with visibility); filled with the default
+// visibility-weighted blend it keeps room B's own light.
+TEST(LppvCli, VisibilityBlendKeepsTheLightOfTheFarRoomOut) {
+  const std::string scene = test::scenesDir() + "/two_rooms.gltf";
+  if (!std::filesystem::exists(scene)) GTEST_SKIP() << scene << " not generated";
+  const std::string dir = test::makeTempDir("kiln_lppv_blend");
+  const std::string kiln = test::kilnExe();
+  std::string out;
+  ASSERT_EQ(test::runCommand(kiln + " probes bake " + scene + " --out " + dir +
+                                 "/p.kprobe --rays 2048 --threads 2 --quiet",
+                             &out),
+            0)
+      << out;
+  const std::string lppv = kiln + " probes lppv " + dir + "/p.kprobe --bounds " +
+                           "4.35,0.2,0.5,4.85,1.2,2.0 --resolution 2,2,3 --out " + dir;
+  ASSERT_EQ(test::runCommand(lppv + "/vis", &out), 0) << out;
+  EXPECT_NE(out.find("filled from the probe field (visibility blend)"), std::string::npos) << out;
+  ASSERT_EQ(test::runCommand(lppv + "/plain --blend plain", &out), 0) << out;
+  EXPECT_NE(out.find("filled from the probe field (plain blend)"), std::string::npos) << out;
+  Result<LppvVolume> vis = loadLppvFile(dir + "/vis.klppv");
+  Result<LppvVolume> plain = loadLppvFile(dir + "/plain.klppv");
+  ASSERT_TRUE(vis.ok()) << vis.error();
+  ASSERT_TRUE(plain.ok()) << plain.error();
+  ASSERT_EQ(vis->sh.size(), plain->sh.size());
+  // Mean luminance of band 0 (2 sqrt(pi) x the mean radiance) over the samples.
+  auto meanC0 = [](const LppvVolume& v) {
+    double sum = 0.0;
+    for (const ShL2Rgb& sh : v.sh)
+      sum += 0.2126 * sh.c[0].x + 0.7152 * sh.c[0].y + 0.0722 * sh.c[0].z;
+    return sum / double(v.sh.size());
+  };
+  // Measured: plain 0.65, visibility 0.0017 (370x); a factor 10 leaves room for any CPU's noise.
+  EXPECT_GT(meanC0(*plain), 10.0 * meanC0(*vis));
+  EXPECT_GT(meanC0(*vis), 0.0);
+  EXPECT_EQ(test::runCommand(lppv + "/bad --blend linear", &out), 2) << out;
+  EXPECT_NE(out.find("--blend"), std::string::npos) << out;
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace kiln

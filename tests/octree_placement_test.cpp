@@ -156,6 +156,39 @@ TEST(OctreePlacement, FinerLevelsKeepCornersNearGeometryOnly) {
   }
 }
 
+TEST(OctreePlacement, CellSizeOfALevelGivesThatLevelAndCountsAreExact) {
+  BlockScene b;
+  OctreePlacementSettings s;
+  s.volumes = {Bounds3{vec3(0.0f), vec3(4.0f)}};
+  s.level = 2;
+  Result<OctreePlacement> byLevel = octreeCornerPlacement(b.scene, *b.tracer, s);
+  s.level = 7;  // ignored once cellSize is set
+  s.cellSize = 1.0f;
+  Result<OctreePlacement> bySize = octreeCornerPlacement(b.scene, *b.tracer, s);
+  ASSERT_TRUE(byLevel.ok() && bySize.ok());
+  EXPECT_EQ(bySize->positions, byLevel->positions);
+  // 0.8 m cells: the root grows to 0.8 x 8 = 6.4 m from the volume's minimum corner; the
+  // block [1.5, 2.5]^3 spans cells 1..3 on each axis: 27 cells less the centre one
+  // ([1.6, 2.4]^3, inside the solid, touching no face); their corners are 4^3 lattice points,
+  // all in the volume.
+  s.cellSize = 0.8f;
+  s.relocate = false;
+  Result<OctreePlacement> odd = octreeCornerPlacement(b.scene, *b.tracer, s);
+  ASSERT_TRUE(odd.ok()) << odd.error();
+  EXPECT_FLOAT_EQ(odd->cellSize, 0.8f);
+  EXPECT_EQ(odd->leafCells, 26u);
+  EXPECT_EQ(odd->corners, 64u);
+  // Exact counts, every probe valid.
+  s.relocate = true;
+  for (uint32_t count : {4u, 26u, 60u, 150u}) {
+    Result<std::vector<vec3>> p = octreeCornerPositions(b.scene, *b.tracer, s, count);
+    ASSERT_TRUE(p.ok()) << p.error();
+    EXPECT_EQ(p->size(), count);
+    for (const vec3& q : *p) EXPECT_TRUE(isValidProbePoint(b.scene, *b.tracer, q, s.validity));
+  }
+  EXPECT_FALSE(octreeCornerPositions(b.scene, *b.tracer, s, 3).ok());
+}
+
 TEST(OctreePlacement, BadSettingsAreErrors) {
   BlockScene b;
   OctreePlacementSettings s;

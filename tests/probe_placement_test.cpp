@@ -264,6 +264,71 @@ TEST(ProbePlacement, LeakEstimateSeesOnlyCellsSpanningAWallWithDifferentLight) {
   EXPECT_LE(leak, volume * relativeIrradianceError(dark, bright, floor));
 }
 
+TEST(ProbePlacement, LeakEstimateScoresTheVisibilityWeightedBlend) {
+  // The cell spanning the wall of the previous test, three probes in the bright left room and
+  // one in the dark right one, with visibility maps baked at the four probes as placement
+  // bakes its candidates (bakePointSh). Plain blending carries the bright probes' light past
+  // the wall; the maps hide them from the points behind it, and the dark probe from the
+  // points in the left room, so the runtime's blend is what each point sees and the estimate
+  // all but vanishes.
+  const Traced t = traced(twoCells());
+  const std::array<vec3, 4> span = {vec3(1.5f, 1.0f, 0.3f), vec3(2.7f, 1.0f, 0.3f),
+                                    vec3(1.5f, 1.0f, 1.7f), vec3(1.5f, 1.8f, 1.0f)};
+  ProbeBakeSettings b;
+  b.rays = 1024;
+  b.bounces = 1;
+  b.lightSamples = 1;
+  b.visibilityMaxDistance = 2.0f;  // the cell's longest edge is 1.84 m
+  ProbeVisibility vis;
+  const std::vector<ShL2Rgb> baked = bakePointSh(t.scene, *t.tracer, span, b, nullptr, nullptr,
+                                                 &vis);
+  ASSERT_EQ(baked.size(), 4u);
+  ASSERT_EQ(vis.resolution, kDefaultVisibilityResolution);
+  ASSERT_EQ(vis.maxDistance, std::vector<float>(4, 2.0f));
+  ASSERT_EQ(vis.moments.size(), 4 * vis.valuesPerProbe());
+  CellProbeMaps maps;
+  maps.resolution = vis.resolution;
+  for (int v = 0; v < 4; ++v) {
+    maps.moments[size_t(v)] = vis.probe(v);
+    maps.maxDistance[size_t(v)] = vis.maxDistance[size_t(v)];
+  }
+  ShL2Rgb bright, dark;
+  bright.c[0] = vec3(2.0f);
+  dark.c[0] = vec3(0.01f);
+  const std::array<const ShL2Rgb*, 4> sh = {&bright, &dark, &bright, &bright};
+  const float floor = 0.05f;
+  const float plain = cellLeakVolumeError(*t.tracer, span, sh, floor);
+  const float weighted = cellLeakVolumeError(*t.tracer, span, sh, floor, maps);
+  EXPECT_GT(plain, 0.0f);
+  // Measured 0.26 plain and 0.0004-0.0007 with maps over four bake seeds (what remains is
+  // the 16 x 16 maps' blur at points next to the wall): a margin of about 4x.
+  EXPECT_LT(weighted, 0.01f * plain) << "plain " << plain << ", with maps " << weighted;
+  // Without visibility (resolution 0) bakePointSh leaves the maps empty.
+  b.visibilityResolution = 0;
+  bakePointSh(t.scene, *t.tracer, span, b, nullptr, nullptr, &vis);
+  EXPECT_TRUE(vis.empty());
+  EXPECT_TRUE(vis.moments.empty());
+}
+
+TEST(ProbePlacement, PlacementWithoutVisibilityStillWorks) {
+  // visibilityResolution 0: candidates get no maps and sets are scored with the plain blend
+  // (for probes baked without visibility); placement keeps its guarantees.
+  const Traced t = traced(twoCells());
+  ProbePlacementSettings s = smallSettings();
+  s.bake.visibilityResolution = 0;
+  Result<ProbePlacement> placed = placeProbes(t.scene, *t.tracer, s);
+  ASSERT_TRUE(bool(placed)) << placed.error();
+  EXPECT_GE(placed->probes.size(), 4u);
+  EXPECT_LE(placed->probes.size(), s.budget);
+  EXPECT_LE(placed->estimatedError, placed->initialError);
+  for (size_t i = 1; i < placed->errorHistory.size(); ++i)
+    EXPECT_LE(placed->errorHistory[i], placed->errorHistory[i - 1]);
+  s.bake.visibilityResolution = 3;  // below kMinVisibilityResolution
+  Result<ProbePlacement> bad = placeProbes(t.scene, *t.tracer, s);
+  ASSERT_FALSE(bool(bad));
+  EXPECT_NE(bad.error().find("visibilityResolution"), std::string::npos) << bad.error();
+}
+
 TEST(ProbePlacement, CliWritesPositionsThatBakeReads) {
   const std::string dir = test::makeTempDir("kiln_place");
   const std::string scene = test::scenesDir() + "/two_rooms.gltf";
@@ -338,7 +403,7 @@ TEST(ProbePlacementSlow, AutomaticBeatsUniformGridOnShippedScenes) {
       }
       ASSERT_TRUE(grid && automatic) << out;
       for (const CsvRow& r : rows)
-        if (r.method != "uniform grid" && r.mean <= grid->mean &&
+        if (r.method.rfind("automatic", 0) == 0 && r.mean <= grid->mean &&
             (fewestMatching == 0 || r.count < fewestMatching))
           fewestMatching = r.count;
       EXPECT_EQ(grid->count, 256u);

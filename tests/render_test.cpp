@@ -437,6 +437,9 @@ TEST_F(RenderCliTest, RendersDeterministicallyAndCompares) {
       << out;
   EXPECT_EQ(test::readTextFile(d + "/a.exr"), test::readTextFile(d + "/b.exr"));
   EXPECT_EQ(test::readTextFile(d + "/a.png"), test::readTextFile(d + "/b.png"));
+  // The plain blend renders too (the spheres' probes then blend by barycentric weights alone).
+  ASSERT_EQ(run(common + " --probe-blend plain --out " + d + "/plain.png", &out), 0) << out;
+  EXPECT_TRUE(fs::exists(d + "/plain.png"));
   ASSERT_EQ(run(common + " --mode reference --samples 4 --out " + d + "/r.png", &out), 0) << out;
   ASSERT_EQ(run("--compare " + d + "/a.png " + d + "/b.png --out " + d + "/same", &out), 0) << out;
   EXPECT_NE(out.find("mean absolute difference 0.000000"), std::string::npos) << out;
@@ -487,6 +490,7 @@ TEST_F(RenderCliTest, BadInputsNameTheFieldAndWriteNothing) {
        "--look-from 0,0"},
       {cornell(), 2, "--lightmaps DIR is required"},
       {cornell() + " --lightmaps " + d + "/bake --mode fancy", 2, "--mode"},
+      {cornell() + " --lightmaps " + d + "/bake --probe-blend linear", 2, "--probe-blend"},
       {cornell() + " --lightmaps " + d + "/bake --spheres " + d + "/goodspheres.json", 2,
        "--probes"},
   };

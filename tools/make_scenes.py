@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 # make_scenes.py: writes the glTF 2.0 test scenes that kiln ships (cornell_box, two_rooms,
-# courtyard; see docs/scenes.md) and validates them. Python 3 standard library only.
+# two_rooms_thin, courtyard; see docs/scenes.md) and validates them. Python 3 standard
+# library only.
 #
 #   python3 tools/make_scenes.py [--out DIR]          write the scenes (default: tools/scenes),
 #                                                     then validate what was written
@@ -709,20 +710,23 @@ def cornell_box(out_dir):
     return g
 
 
-# ----------------------------------------------------------------------------- scene 2
+# ----------------------------------------------------------------------------- scenes 2, 2b
 # Two rooms side by side along +X, each 4 x 3 x 4 m inside, walls 0.25 m, floor/ceiling slabs
-# 0.25 m. Room A: x in [0, 4]; shared wall x in [4, 4.25]; room B: x in [4.25, 8.25];
-# z in [0, 4]; floor top y = 0, ceiling underside y = 3.
+# 0.25 m. Room A: x in [0, 4]; shared wall x in [4, 4 + s] (s = 0.25 in two_rooms, 0.05 in
+# two_rooms_thin); room B: x in [4 + s, 8 + s]; z in [0, 4]; floor top y = 0, ceiling
+# underside y = 3.
 TR_T = 0.25
+TR_THIN = 0.05  # two_rooms_thin's shared wall
 TR_ROOM_A = ((0.0, 4.0), (0.0, 3.0), (0.0, 4.0))
-TR_ROOM_B = ((4.25, 8.25), (0.0, 3.0), (0.0, 4.0))
 TR_WINDOW = (2.4, 3.6, 0.9, 2.1)  # south wall (z in [-0.25, 0]): x0, x1, y0, y1
 TR_DOOR = (2.8, 3.8, 2.1)  # shared wall: z0, z1, top
 TR_SUN = sun_direction(40.0, 20.0)
 
 
-def two_rooms(out_dir):
-    g = Gltf("two_rooms")
+def two_rooms(out_dir, name="two_rooms", shared=TR_T):
+    """two_rooms (shared wall TR_T thick) or, with another name and `shared`, the same rooms
+    with a thinner shared wall; room B and everything in it move with the wall's far face."""
+    g = Gltf(name)
     g.material("wall_white", (0.7, 0.7, 0.68))
     g.material("ceiling_white", (0.75, 0.75, 0.73))
     g.material("floor_terracotta", (0.62, 0.32, 0.2))
@@ -732,7 +736,8 @@ def two_rooms(out_dir):
     g.material("cabinet_blue", (0.25, 0.35, 0.55))
     g.material("dynamic_orange", (0.8, 0.45, 0.1))
     t = TR_T
-    x_end = 8.25
+    room_b = ((4.0 + shared, 8.0 + shared), (0.0, 3.0), (0.0, 4.0))
+    x_end = room_b[0][1]
     # Walls reach halfway into the floor and ceiling slabs and into the walls they meet, so
     # that no two solids share a face (no coplanar overlaps anywhere); the 0.125 m notch this
     # leaves at the four outer corners is outside the rooms.
@@ -744,7 +749,7 @@ def two_rooms(out_dir):
 
     mb = MeshBuilder("floor")
     mb.slab("x", fx, (-t, 0.0), fz, "concrete",
-            top_materials=[(4.0 + t / 2.0, "floor_terracotta"), (fx[1], "floor_grey")])
+            top_materials=[(4.0 + shared / 2.0, "floor_terracotta"), (fx[1], "floor_grey")])
     g.node("floor", mb)
     mb = MeshBuilder("ceiling")
     mb.slab("x", fx, (3.0, 3.0 + t), fz, "ceiling_white")
@@ -764,14 +769,15 @@ def two_rooms(out_dir):
     g.node("wall_east", mb)
     dz0, dz1, dtop = TR_DOOR
     mb = MeshBuilder("wall_shared")
-    mb.slab("z", side_z, wy, (4.0, 4.0 + t), "wall_white", holes=[(dz0, dz1, wy[0], dtop)])
+    mb.slab("z", side_z, wy, (4.0, 4.0 + shared), "wall_white",
+            holes=[(dz0, dz1, wy[0], dtop)])
     g.node("wall_shared", mb)
 
     # Furniture: solid boxes sunk 1 cm into the floor (no face shared with the floor).
     furniture = [  # name, material, local box, translation, rotation about Y (degrees)
         ("table_A", "wood", ((-0.5, -0.01, -0.35), (0.5, 0.45, 0.35)), (1.0, 0.0, 3.0), 15.0),
         ("cabinet_B", "cabinet_blue", ((-0.175, -0.01, -0.5), (0.175, 1.8, 0.5)),
-         (8.025, 0.0, 1.5), 0.0),
+         (x_end - 0.225, 0.0, 1.5), 0.0),
     ]
     solids = []  # world-space boxes as 8 corners, for the clearance checks below
     for name, mat, (lo, hi), tr, rot in furniture:
@@ -782,21 +788,21 @@ def two_rooms(out_dir):
     # A small dynamic box in room B: lit by probes, no lightmap, not part of the static scene.
     mb = MeshBuilder("dynamic_box")
     mb.box((-0.15, 0.0, -0.15), (0.15, 0.3, 0.15), "dynamic_orange")
-    g.node("dynamic_box", mb, translation=(6.0, 0.0, 1.0), rotation=quat_y(30.0),
+    box_at = (room_b[0][0] + 1.75, 0.0, 1.0)
+    g.node("dynamic_box", mb, translation=box_at, rotation=quat_y(30.0),
            extras={"kiln": {"static": False}})
-    solids.append(("dynamic_box", (-0.15, 0.0, -0.15), (0.15, 0.3, 0.15), (6.0, 0.0, 1.0),
-                   30.0))
+    solids.append(("dynamic_box", (-0.15, 0.0, -0.15), (0.15, 0.3, 0.15), box_at, 30.0))
 
     # Probes: 3 x 2 x 3 per room, stored relative to the group node's translation.
-    origin = (4.125, 1.5, 2.0)
+    origin = (0.5 * x_end, 1.5, 2.0)
     probes = []
-    for (rx, _, _) in (TR_ROOM_A, TR_ROOM_B):
+    for (rx, _, _) in (TR_ROOM_A, room_b):
         for ox in (0.75, 2.0, 3.25):
             for y in (0.9, 2.1):
                 for z in (0.75, 2.0, 3.25):
                     probes.append((rx[0] + ox, y, z))
     for p in probes:  # >= 0.3 m from the room's surfaces and from every block
-        room = TR_ROOM_A if p[0] < 4.0 else TR_ROOM_B
+        room = TR_ROOM_A if p[0] < 4.0 else room_b
         assert all(room[k][0] + 0.3 <= p[k] <= room[k][1] - 0.3 for k in range(3)), p
         for name, lo, hi, tr, rot in solids:
             q = vsub(p, tr)
@@ -927,7 +933,7 @@ def courtyard(out_dir):
     return g
 
 
-SCENES = ("cornell_box", "two_rooms", "courtyard")
+SCENES = ("cornell_box", "two_rooms", "two_rooms_thin", "courtyard")
 
 
 # ----------------------------------------------------------------------------- --check
@@ -1240,6 +1246,7 @@ def main():
     if not args.check:
         cornell_box(args.out)
         two_rooms(args.out)
+        two_rooms(args.out, "two_rooms_thin", TR_THIN)
         courtyard(args.out)
     failed = False
     for name in SCENES:

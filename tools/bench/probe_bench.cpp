@@ -7,7 +7,13 @@
 //   - CGAL: Delaunay_triangulation_3::locate on the same random points (no hint) and on the
 //     path (hinted with the previous cell), CGAL's own triangulation of the same probes;
 //   - BruteForce: a scan of every tetrahedron (barycentric test), the baseline a lookup
-//     structure must beat, on fewer probes.
+//     structure must beat, on fewer probes;
+//   - BlendHinted: the hinted path's lookup plus the SH blend (locateProbe + interpolateProbes),
+//     on the same random probes given synthetic 16 x 16 visibility maps, with visibility
+//     weighting (visibility:1) and without (visibility:0, the plain barycentric blend of the
+//     same set): the two rows of one probe count give the cost of leak-free blending as a
+//     ratio (the aim is at most 2x). bytes_per_probe is the .kprobe size (serializeProbeSet)
+//     over the probe count, with the visibility block (visibility:1) and without it (0).
 // Tetrahedralization: buildProbeTopology (Delaunay + outer cells + seed grid) with TetGen and
 // with CGAL for 1k, 10k and 100k random probes.
 // Each benchmark reports items_per_second (lookups, or probes tetrahedralized).
@@ -15,6 +21,7 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -23,6 +30,7 @@
 
 #include "kiln/probe_runtime.h"
 #include "probes/tetrahedralize.h"
+#include "probes/visibility_bake.h"
 
 namespace kiln {
 namespace {
@@ -155,6 +163,68 @@ void BM_LocateBruteForce(benchmark::State& state) {
   state.SetItemsProcessed(int64_t(state.iterations()) * int64_t(points.size()));
 }
 
+// The random probe set of `fixture` (same positions, no CGAL) with a synthetic visibility map
+// per probe, and the file size per probe with and without the maps.
+struct VisibilityFixture {
+  ProbeSet set;
+  double bytesPerProbe = 0.0, plainBytesPerProbe = 0.0;
+};
+
+constexpr int32_t kBenchVisibilityResolution = 16;  // the bake's default
+
+// Every texel a depth distribution with a mean uniform in [0.2, 1] of the probe's maxDistance
+// (per-probe D to the farthest corner of the probes' bounds, as a bake sets it) and a spread of
+// 5% of D. Random probes in
+// empty space would see nothing (mean 1: every test passes at once); these means put a
+// good share of the tests past the mean, into the Chebyshev branch a wall between probes
+// takes, so the timing is not the cheapest case.
+void addSyntheticVisibility(ProbeSet& set, int32_t resolution, uint32_t seed) {
+  ProbeVisibility& v = set.visibility;
+  v.resolution = resolution;
+  v.maxDistance = visibilityMaxDistances(set.positions, Bounds3{});
+  v.moments.resize(size_t(set.probeCount()) * v.valuesPerProbe());
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> mean(0.2f, 1.0f);
+  constexpr float kSpread = 0.05f;
+  for (size_t t = 0; t + 1 < v.moments.size(); t += 2) {
+    const float m = mean(rng);
+    v.moments[t] = uint16_t(std::lround(m * 65535.0f));
+    v.moments[t + 1] = uint16_t(std::lround(kSpread * 65535.0f));
+  }
+}
+
+const VisibilityFixture& visibilityFixture(int probes) {
+  static std::map<int, std::unique_ptr<VisibilityFixture>> cache;
+  auto& slot = cache[probes];
+  if (!slot) {
+    slot = std::make_unique<VisibilityFixture>();
+    slot->set = buildProbeTopology(randomPoints(size_t(probes), 1)).value();
+    const double n = double(slot->set.probeCount());
+    slot->plainBytesPerProbe = double(serializeProbeSet(slot->set).size()) / n;
+    addSyntheticVisibility(slot->set, kBenchVisibilityResolution, 4);
+    slot->bytesPerProbe = double(serializeProbeSet(slot->set).size()) / n;
+  }
+  return *slot;
+}
+
+void BM_BlendHinted(benchmark::State& state) {
+  const VisibilityFixture& f = visibilityFixture(int(state.range(0)));
+  ProbeBlendSettings blend;
+  blend.visibility = state.range(1) != 0;
+  const std::vector<glm::vec3> path = pathPoints();
+  int32_t hint = -1;
+  for (auto _ : state) {
+    for (const glm::vec3& p : path) {
+      const ProbeLocation loc = locateProbe(f.set, p, hint, blend);
+      hint = loc.cell;
+      const ShL2Rgb sh = interpolateProbes(f.set, loc);
+      benchmark::DoNotOptimize(sh);
+    }
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+  state.counters["bytes_per_probe"] = blend.visibility ? f.bytesPerProbe : f.plainBytesPerProbe;
+}
+
 void BM_Tetrahedralize(benchmark::State& state) {
   const std::vector<glm::vec3> positions = randomPoints(size_t(state.range(1)), 3);
   ProbeTopologySettings settings;
@@ -176,6 +246,14 @@ BENCHMARK(BM_LocateUnhinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_CgalLocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_CgalLocateRandom)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateBruteForce)->Arg(1000);
+BENCHMARK(BM_BlendHinted)
+    ->ArgNames({"probes", "visibility"})
+    ->Args({1000, 0})
+    ->Args({1000, 1})
+    ->Args({10000, 0})
+    ->Args({10000, 1})
+    ->Args({100000, 0})
+    ->Args({100000, 1});
 BENCHMARK(BM_Tetrahedralize)
     ->ArgNames({"backend", "probes"})
     ->Args({0, 1000})

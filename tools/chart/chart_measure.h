@@ -6,7 +6,9 @@
 //      uniform grid and Godot-style octree corners;
 //   3. shIrradianceChart: L1 vs L2 vs windowed L2 irradiance error on HDR environment maps;
 //   4. tetrahedralizationChart: TetGen vs CGAL tetrahedralization time;
-//   5. probeLookupChart: lookups per second, hinted walk / unhinted / CGAL locate / brute force.
+//   5. probeLookupChart: lookups per second, hinted walk / unhinted / CGAL locate / brute force;
+//   6. probeVisibilityChart: light leaking through a wall vs the size of the probes'
+//      visibility maps (resolution 0 = plain blending to 32 x 32).
 //
 // Accuracy numbers are deterministic (keyed randomness, parallelFor); timings are medians of
 // repeats interleaved between the variants of a chart in the same run, on this machine.
@@ -38,6 +40,7 @@ Result<ChartTable> probePlacementChart(const ChartOptions& options);
 Result<ChartTable> shIrradianceChart(const ChartOptions& options);
 Result<ChartTable> tetrahedralizationChart(const ChartOptions& options);
 Result<ChartTable> probeLookupChart(const ChartOptions& options);
+Result<ChartTable> probeVisibilityChart(const ChartOptions& options);
 
 // Notes every chart's CSV starts with: the command, the machine, threads, seed.
 std::vector<std::string> commonNotes(const ChartOptions& options, int threadsUsed);

@@ -1,4 +1,4 @@
-// chart_runner.cpp: `kiln chart`'s run over the five charts (chart_runner.h).
+// chart_runner.cpp: `kiln chart`'s run over the six charts (chart_runner.h).
 #include "tools/chart/chart_runner.h"
 
 #include <algorithm>
@@ -9,8 +9,8 @@
 namespace kiln::chart {
 
 const std::vector<std::string>& chartNames() {
-  static const std::vector<std::string> names = {"lightmap", "placement", "sh",
-                                                 "tetrahedralization", "lookup"};
+  static const std::vector<std::string> names = {"lightmap",           "placement", "sh",
+                                                 "tetrahedralization", "lookup",    "visibility"};
   return names;
 }
 
@@ -32,7 +32,8 @@ Result<ChartRunReport> runCharts(const ChartOptions& options, const std::string&
   for (const std::string& n : only)
     if (std::find(chartNames().begin(), chartNames().end(), n) == chartNames().end())
       return Error{"unknown chart '" + n +
-                   "' (expected lightmap, placement, sh, tetrahedralization or lookup)"};
+                   "' (expected lightmap, placement, sh, tetrahedralization, lookup or "
+                   "visibility)"};
   std::error_code ec;
   std::filesystem::create_directories(outDir, ec);
   if (ec || !std::filesystem::is_directory(outDir))
@@ -41,8 +42,8 @@ Result<ChartRunReport> runCharts(const ChartOptions& options, const std::string&
 
   using Measure = std::function<Result<ChartTable>(const ChartOptions&)>;
   const std::vector<Measure> measures = {lightmapSamplesChart, probePlacementChart,
-                                         shIrradianceChart, tetrahedralizationChart,
-                                         probeLookupChart};
+                                         shIrradianceChart,    tetrahedralizationChart,
+                                         probeLookupChart,     probeVisibilityChart};
   ChartRunReport report;
   report.gnuplot = findGnuplot();
   report.gnuplotMissing = report.gnuplot.empty();

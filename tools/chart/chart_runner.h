@@ -11,7 +11,7 @@
 namespace kiln::chart {
 
 // The charts by the names `--only` takes, in order: lightmap, placement, sh,
-// tetrahedralization, lookup.
+// tetrahedralization, lookup, visibility.
 const std::vector<std::string>& chartNames();
 
 struct ChartRunReport {

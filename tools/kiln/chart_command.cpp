@@ -59,13 +59,14 @@ void registerChartCommand(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "chart",
       "Speed-against-accuracy charts (CSV + gnuplot PNG each): lightmap samples vs error vs "
-      "time, probe placement, L1/L2 SH irradiance, TetGen vs CGAL, lookup throughput");
+      "time, probe placement, L1/L2 SH irradiance, TetGen vs CGAL, lookup throughput, probe "
+      "visibility leak vs map size");
   c->add_option("--out,-o", o->out, "Output directory (created; files replaced atomically)")
       ->required();
   c->add_flag("--quick", o->quick, "Small sizes (seconds): for tests and a first look");
   c->add_option("--only", o->only,
                 "Only these charts (repeatable): lightmap, placement, sh, tetrahedralization, "
-                "lookup")
+                "lookup, visibility")
       ->check(CLI::IsMember(chart::chartNames()));
   c->add_option("--scenes", o->scenes, "Directory of cornell_box.gltf and two_rooms.gltf")
       ->capture_default_str();

@@ -1,6 +1,7 @@
 // probes_command.cpp: `kiln probes bake | query | export`, the light-probe SH bake and the
 // tools to look inside a .kprobe file. Thin over probes/probe_baker.h (bake) and kiln_runtime
 // (query, export). Usage and formats: docs/probes.md.
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -10,15 +11,16 @@
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <sstream>
 
 #include "kiln/probe_runtime.h"
 #include "kiln/probe_set.h"
 #include "probes/probe_baker.h"
 #include "src/progress.h"
+#include "src/text_file.h"
 #include "src/tracer.h"
 #include "tools/kiln/cli_common.h"
-#include "src/text_file.h"
 
 namespace kiln::cli {
 namespace {
@@ -60,8 +62,16 @@ struct BakeOptions {
   int threads = 0;
   bool noDering = false;
   bool noSceneProbes = false;
+  int visibilityResolution = kDefaultVisibilityResolution;  // 0 = none
+  float visibilityMaxDistance = 0.0f;                       // 0 = per probe (auto)
   bool quiet = false;
 };
+
+// Bytes the visibility block adds per probe: its maxDistance (f32) and R^2 x 2 unorm16 moments.
+size_t visibilityBytesPerProbe(int32_t resolution) {
+  return resolution > 0 ? sizeof(float) + 2 * sizeof(uint16_t) * size_t(resolution) * resolution
+                        : 0;
+}
 
 int runBake(const BakeOptions& o) {
   Scene scene;
@@ -101,6 +111,8 @@ int runBake(const BakeOptions& o) {
   if (o.bounces >= 0) settings.bounces = o.bounces;
   settings.threads = o.threads;
   settings.dering = !o.noDering;
+  settings.visibilityResolution = o.visibilityResolution;
+  settings.visibilityMaxDistance = o.visibilityMaxDistance;
   if (!o.lightingMode.empty()) {
     Result<LightingMode> mode = parseLightingMode(o.lightingMode);
     if (!mode) {
@@ -150,6 +162,19 @@ int runBake(const BakeOptions& o) {
       }
     }
     std::cerr << "\n";
+    const ProbeVisibility& vis = set->visibility;
+    if (vis.empty()) {
+      std::cerr << "kiln: visibility none (plain barycentric blending)\n";
+    } else {
+      float lo = kInfinity, hi = 0.0f;
+      for (float d : vis.maxDistance) lo = std::min(lo, d), hi = std::max(hi, d);
+      std::cerr << "kiln: visibility " << vis.resolution << " x " << vis.resolution
+                << " depth moments per probe, " << visibilityBytesPerProbe(vis.resolution)
+                << " bytes per probe, max distance " << lo << " to " << hi << " m"
+                << (o.visibilityMaxDistance > 0.0f ? " (--visibility-max-distance)"
+                                                   : " (longest edge of each probe's cells)")
+                << "\n";
+    }
   }
   return kExitOk;
 }
@@ -159,6 +184,7 @@ int runBake(const BakeOptions& o) {
 struct QueryOptions {
   std::string file;
   std::vector<double> coords;  // x y z [nx ny nz]
+  std::string blend = "visibility";
   bool json = false;
 };
 
@@ -182,7 +208,14 @@ int runQuery(const QueryOptions& o) {
     printError(set.error());
     return kExitBadInput;
   }
-  const ProbeLocation loc = locateProbe(*set, p);
+  // The point is blended as an object's centre (no surface normal, so no normal bias): the
+  // query's normal only chooses the direction the irradiance is evaluated for.
+  ProbeBlendSettings blend;
+  blend.visibility = o.blend == "visibility";
+  const ProbeLocation loc = locateProbe(*set, p, -1, blend);
+  // What the weights are: visibility-weighted only when asked for and the file has the maps.
+  const bool visibilityUsed = blend.visibility && !set->visibility.empty();
+  const std::string blendName = visibilityUsed ? "visibility" : "plain";
   const ShL2Rgb sh = interpolateProbes(*set, loc);
   const glm::vec3 e = probeIrradiance(sh, n);
   const glm::vec4 occlusion = interpolateOcclusion(*set, loc);
@@ -196,6 +229,9 @@ int runQuery(const QueryOptions& o) {
     j["probes"] = loc.probes;
     j["weights"] = Json::array();
     for (float w : loc.weights) j["weights"].push_back(shortest(w));
+    j["barycentric"] = Json::array();
+    for (float w : loc.barycentric) j["barycentric"].push_back(shortest(w));
+    j["blend"] = blendName;
     j["sh"] = shJson(sh);
     j["irradiance"] = vecJson(e);
     j["occlusion"] = vec4Json(occlusion);
@@ -206,8 +242,13 @@ int runQuery(const QueryOptions& o) {
   std::printf("point (%g, %g, %g)\n", p.x, p.y, p.z);
   std::printf("tet %d (%s)\n", loc.cell, outer ? "outer cell, extrapolated" : "inside the hull");
   std::printf("probes %d %d %d %d\n", loc.probes[0], loc.probes[1], loc.probes[2], loc.probes[3]);
-  std::printf("weights %.6g %.6g %.6g %.6g\n", loc.weights[0], loc.weights[1], loc.weights[2],
-              loc.weights[3]);
+  std::printf("barycentric %.6g %.6g %.6g %.6g\n", loc.barycentric[0], loc.barycentric[1],
+              loc.barycentric[2], loc.barycentric[3]);
+  std::printf("weights %.6g %.6g %.6g %.6g (blend %s%s)\n", loc.weights[0], loc.weights[1],
+              loc.weights[2], loc.weights[3], blendName.c_str(),
+              visibilityUsed            ? ""
+              : set->visibility.empty() ? ": the file has no visibility"
+                                        : ": --blend plain");
   std::printf("sh (radiance, W/(m^2 sr), r g b per coefficient):\n");
   static const char* kNames[kShL2Count] = {"Y00",  "Y1-1", "Y10", "Y11", "Y2-2",
                                            "Y2-1", "Y20",  "Y21", "Y22"};
@@ -230,9 +271,10 @@ struct ExportOptions {
   std::string file;
   std::string out;
   bool json = false;
+  bool moments = false;
 };
 
-Json exportJson(const ProbeSet& s) {
+Json exportJson(const ProbeSet& s, bool withMoments) {
   Json j;
   j["version"] = kProbeFileVersion;
   j["dimension"] = s.dimension;
@@ -258,6 +300,28 @@ Json exportJson(const ProbeSet& s) {
   j["validity"] = std::move(validity);
   j["sh"] = std::move(sh);
   j["occlusion"] = std::move(occlusion);
+  const ProbeVisibility& vis = s.visibility;
+  j["visibilityResolution"] = vis.resolution;
+  j["visibilityConvention"] =
+      "per probe, an octahedral map (visibilityResolution^2 texels, +z at the centre, texel "
+      "(i, j) at index j * R + i) of the mean and mean square of the first-hit distance of the "
+      "probe's bake rays, clamped to visibilityMaxDistance D (metres) and divided by D (resp. "
+      "D^2); visibilityMoments (with --visibility-moments) lists them per texel as [mean, mean "
+      "square] in those units; resolution 0 = no visibility (plain blending)";
+  Json maxDistance = Json::array();
+  for (float d : vis.maxDistance) maxDistance.push_back(shortest(d));
+  j["visibilityMaxDistance"] = std::move(maxDistance);
+  if (withMoments && !vis.empty()) {
+    Json moments = Json::array();
+    for (int32_t i = 0; i < s.probeCount(); ++i) {
+      const std::span<const uint16_t> m = vis.probe(i);
+      Json texels = Json::array();
+      for (size_t t = 0; t + 1 < m.size(); t += 2)
+        texels.push_back({shortest(float(m[t]) / 65535.0f), shortest(float(m[t + 1]) / 65535.0f)});
+      moments.push_back(std::move(texels));
+    }
+    j["visibilityMoments"] = std::move(moments);
+  }
   Json cells = Json::array();
   for (const glm::ivec4& c : s.cells) cells.push_back({c[0], c[1], c[2], c[3]});
   j["cells"] = std::move(cells);
@@ -270,7 +334,7 @@ int runExport(const ExportOptions& o) {
     printError(set.error());
     return kExitBadInput;
   }
-  const std::string text = exportJson(*set).dump(2) + "\n";
+  const std::string text = exportJson(*set, o.moments).dump(2) + "\n";
   if (o.out.empty()) {
     std::cout << text;
     return kExitOk;
@@ -328,6 +392,39 @@ void registerProbesCommand(CLI::App& app) {
               "Keep the raw SH even where its irradiance goes negative");
   b->add_flag("--no-scene-probes", bake->noSceneProbes,
               "Ignore the scene's probe groups (use only --positions)");
+  b->add_option("--visibility-resolution", bake->visibilityResolution,
+                "Side of each probe's octahedral visibility map for leak-free blending (" +
+                    std::to_string(kMinVisibilityResolution) + " to " +
+                    std::to_string(kMaxVisibilityResolution) + "; 0 = none: plain blending)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            int v = -1;
+            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
+            const bool number = r.ec == std::errc() && r.ptr == text.data() + text.size();
+            if (number &&
+                (v == 0 || (v >= kMinVisibilityResolution && v <= kMaxVisibilityResolution)))
+              return "";
+            return "must be 0 (no visibility) or an integer from " +
+                   std::to_string(kMinVisibilityResolution) + " to " +
+                   std::to_string(kMaxVisibilityResolution) + ", got '" + text + "'";
+          },
+          "0 or " + std::to_string(kMinVisibilityResolution) + ".." +
+              std::to_string(kMaxVisibilityResolution)))
+      ->capture_default_str();
+  b->add_option("--visibility-max-distance", bake->visibilityMaxDistance,
+                "Metres the visibility depths are clamped to (0 = per probe, the longest edge "
+                "of its cells)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            // Range() lets NaN through (every comparison with it is false).
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v >= 0.0 && v <= 1e9)
+              return "";
+            return "must be a finite number of metres >= 0 (0 = auto), got '" + text + "'";
+          },
+          "METRES >= 0"))
+      ->capture_default_str();
   b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
   b->callback(commandCallback([bake]() { return runBake(*bake); }));
 
@@ -338,8 +435,14 @@ void registerProbesCommand(CLI::App& app) {
   q->add_option("coords", query->coords, "X Y Z [NX NY NZ]: point and optional normal (+Y)")
       ->required()
       ->expected(3, 6);
+  q->add_option("--blend", query->blend,
+                "visibility: weight the probes by their visibility of the point (when the file "
+                "has it); plain: barycentric weights alone")
+      ->check(CLI::IsMember({"plain", "visibility"}))
+      ->capture_default_str();
   q->add_flag("--json", query->json,
-              "Print JSON with keys tet, probes, weights, sh (9 x [r, g, b]), irradiance");
+              "Print JSON with keys tet, probes, weights (the blend's), barycentric, blend, sh "
+              "(9 x [r, g, b]), irradiance");
   q->callback(commandCallback([query]() { return runQuery(*query); }));
 
   auto exp = std::make_shared<ExportOptions>();
@@ -347,6 +450,9 @@ void registerProbesCommand(CLI::App& app) {
   e->add_option("file", exp->file, ".kprobe file")->required();
   e->add_flag("--json", exp->json, "JSON output (the only format; accepted for clarity)");
   e->add_option("--out,-o", exp->out, "Write to this file instead of stdout");
+  e->add_flag("--visibility-moments", exp->moments,
+              "Also list every probe's visibility map (visibilityMoments; large: R^2 texels "
+              "per probe)");
   e->callback(commandCallback([exp]() { return runExport(*exp); }));
 
   registerProbesLppvCommand(*probes);

@@ -37,6 +37,7 @@ struct LppvOptions {
   int maxResolution = 32;
   bool unityAxes = false;
   bool half = false;
+  std::string blend = "visibility";
   std::string scene;
   int rays = 4096;
   int threads = 0;
@@ -103,6 +104,10 @@ int runLppv(const LppvOptions& o) {
     printError(set.error());
     return kExitBadInput;
   }
+  // The fill blends with locateProbe's default, visibility-weighted when the file has the
+  // maps; a set without them blends plainly, so dropping them is exactly --blend plain.
+  const bool visibilityUsed = o.blend == "visibility" && !set->visibility.empty();
+  if (o.blend == "plain") set->visibility = ProbeVisibility{};
   Result<LppvBuild> built = buildLppvFromProbes(*set, settings);
   if (!built) {
     printError(o.file + ": " + built.error());
@@ -162,7 +167,10 @@ int runLppv(const LppvOptions& o) {
                 << (a.wholeSetDensity ? " (none: the whole set's density)" : "")
                 << ", probe spacing " << a.probeSpacing << " m";
     }
-    std::cerr << (o.scene.empty() ? "; filled from the probe field" : "; baked directly")
+    std::cerr << (o.scene.empty()
+                      ? (visibilityUsed ? "; filled from the probe field (visibility blend)"
+                                        : "; filled from the probe field (plain blend)")
+                      : "; baked directly")
               << "\nkiln: wrote " << files->volume << ", " << files->unityL1 << ", "
               << files->metadata << "\n";
   }
@@ -202,6 +210,11 @@ void registerProbesLppvCommand(CLI::App& probes) {
   c->add_flag("--unity-axes", o->unityAxes,
               "Pack the L1 EXR for Unity's axes (x negated, grid mirrored in x)");
   c->add_flag("--half", o->half, "Write the L1 EXR as half floats (default: float)");
+  c->add_option("--blend", o->blend,
+                "How the probe field is blended at the samples: visibility (weight probes by "
+                "their visibility of the sample, when the file has it) or plain (barycentric)")
+      ->check(CLI::IsMember({"plain", "visibility"}))
+      ->capture_default_str();
   c->add_option("--scene", o->scene,
                 "Bake the samples directly from this glTF scene instead of interpolating "
                 "the probes (FILE still sets the auto resolution)");

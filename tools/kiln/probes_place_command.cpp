@@ -1,7 +1,10 @@
 // probes_place_command.cpp: `kiln probes place` (automatic probe placement, writes the JSON
 // that `kiln probes bake --positions` reads) and `kiln probes compare-placement` (the
-// rerunnable comparison of automatic placement against a uniform grid). Thin over
-// probes/probe_placement.h. Usage, algorithm and measurements: docs/probe_placement.md.
+// rerunnable comparison of automatic placement against a uniform grid and Godot-style octree
+// corners, each evaluated with and without visibility-weighted blending). Thin over
+// probes/probe_placement.h and probes/octree_placement.h. Usage, algorithm and measurements:
+// docs/probe_placement.md.
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -14,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "probes/octree_placement.h"
 #include "probes/probe_baker.h"
 #include "probes/probe_placement.h"
 #include "src/progress.h"
@@ -61,6 +65,7 @@ struct CommonOptions {
   float spacing = 0.0f;
   int depth = 2;
   float leakWeight = 1.0f;
+  int visibilityResolution = kDefaultVisibilityResolution;  // 0 = score the plain blend
   uint64_t seed = 0;
   int threads = 0;
   bool quiet = false;
@@ -83,6 +88,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
   s->spacing = o.spacing;
   s->maxDepth = o.depth;
   s->leakWeight = o.leakWeight;
+  s->bake.visibilityResolution = o.visibilityResolution;
   s->seed = o.seed;
   s->threads = o.threads;
   s->bake.threads = o.threads;
@@ -111,6 +117,25 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
   c->add_option("--leak-weight", o->leakWeight,
                 "Weight of the leak estimate (cells spanning walls) in a set's score (0 = off)")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  c->add_option("--visibility-resolution", o->visibilityResolution,
+                "Side of the visibility maps the cheap bakes record, so that sets are scored "
+                "with the visibility-weighted blend (as kiln probes bake; 0 = plain blend, for "
+                "probes baked without visibility)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            int v = -1;
+            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
+            const bool number = r.ec == std::errc() && r.ptr == text.data() + text.size();
+            if (number && (v == 0 || (v >= kMinVisibilityResolution &&
+                                      v <= kMaxVisibilityResolution)))
+              return "";
+            return "must be 0 (plain blend) or an integer from " +
+                   std::to_string(kMinVisibilityResolution) + " to " +
+                   std::to_string(kMaxVisibilityResolution) + ", got '" + text + "'";
+          },
+          "0 or " + std::to_string(kMinVisibilityResolution) + ".." +
+              std::to_string(kMaxVisibilityResolution)))
       ->capture_default_str();
   c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
   c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")
@@ -177,6 +202,7 @@ int runPlace(const PlaceOptions& o) {
                 {"candidatesMoved", placed->candidatesMoved},
                 {"candidatesDropped", placed->candidatesDropped},
                 {"checkPoints", placed->checkPoints},
+                {"visibilityResolution", settings.bake.visibilityResolution},
                 {"spawned", placed->spawned},
                 {"initialError", placed->initialError},
                 {"estimatedError", placed->estimatedError},
@@ -196,7 +222,9 @@ int runPlace(const PlaceOptions& o) {
               << " moved out of or away from geometry, " << placed->candidatesDropped
               << " dropped; " << placed->spawned
               << " probes added at check points); estimated score (mean relative irradiance "
-              << "error + leak estimate) " << std::setprecision(3) << placed->estimatedError
+              << "error + leak estimate, "
+              << (settings.bake.visibilityResolution > 0 ? "visibility-weighted" : "plain")
+              << " blend) " << std::setprecision(3) << placed->estimatedError
               << " (leak " << placed->estimatedLeak << ", 95th percentile of the error "
               << placed->estimatedError95 << ", from " << placed->initialError << ") at "
               << placed->checkPoints << " check points; " << placed->rounds << " rounds, "
@@ -221,11 +249,25 @@ struct CompareOptions {
 struct Row {
   std::string method;
   size_t count = 0;
-  FieldError error;
-  float nearWall = 0.0f;  // mean over points within 0.5 m of a surface
+  FieldError error;       // visibility-weighted blend (the runtime's default)
+  FieldError plain;       // plain barycentric blend of the same probes
+  float nearWall = 0.0f;  // mean over points within 0.5 m of a surface (visibility)
+  float nearWallPlain = 0.0f;
   CellCrossing crossing;
   double seconds = 0.0;
 };
+
+// The fewest probes of an automatic row whose mean (visibility-weighted or plain) is at most
+// the grid's; 0 = none.
+size_t countToMatch(const std::vector<Row>& rows, const Row& grid, bool visibility) {
+  auto mean = [&](const Row& r) { return visibility ? r.error.mean : r.plain.mean; };
+  size_t needed = 0;
+  for (const Row& r : rows)
+    if (r.method.rfind("automatic", 0) == 0 && mean(r) <= mean(grid) &&
+        (needed == 0 || r.count < needed))
+      needed = r.count;
+  return needed;
+}
 
 int runCompare(const CompareOptions& o) {
   ProbePlacementSettings settings;
@@ -268,11 +310,36 @@ int runCompare(const CompareOptions& o) {
   double meanRms = 0.0;
   for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
   const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
+  // The measure's noise: a second bake of the points with another seed against the truth.
+  // Probes have the same noise (same rays), so no method can score much below this (a blend
+  // of four probes averages theirs down to between 1/sqrt(2) and 1 times it).
+  std::vector<ShL2Rgb> rebaked;
+  {
+    ProbeBakeSettings again = bake;
+    again.seed = hashValues(evalSeed, 0x6e6f697365ULL);  // "noise"
+    Progress progress("noise", points.size(), "points", !o.common.quiet);
+    rebaked = bakePointSh(scene, tracer, points, again, &progress, &cancelFlag());
+    progress.finish();
+  }
+  if (rebaked.empty()) {
+    printError("interrupted");
+    return kExitBadInput;
+  }
+  std::vector<float> noiseErrors(points.size());
+  for (size_t i = 0; i < points.size(); ++i)
+    noiseErrors[i] = relativeIrradianceError(truth[i], rebaked[i], floor);
+  const FieldError noise = summarizeFieldError(std::move(noiseErrors));
   std::vector<uint8_t> nearWall(points.size());
   for (size_t i = 0; i < points.size(); ++i)
     nearWall[i] = probePoint(scene, tracer, points[i], 256).nearestDistance < 0.5f;
 
+  // Every method's probes are baked once, with visibility maps as `kiln probes bake` makes
+  // them (per-probe maxDistance from the topology), and measured with both blends.
   bake.seed = o.common.seed;
+  bake.visibilityResolution = o.common.visibilityResolution > 0 ? o.common.visibilityResolution
+                                                                 : kDefaultVisibilityResolution;
+  ProbeBlendSettings plainBlend;
+  plainBlend.visibility = false;
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds) -> std::optional<Row> {
     Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, &cancelFlag());
@@ -284,17 +351,30 @@ int runCompare(const CompareOptions& o) {
     row.method = method;
     row.count = positions.size();
     row.error = measureFieldError(*set, points, truth, floor, o.common.threads);
-    double sum = 0.0;
+    row.plain = measureFieldError(*set, points, truth, floor, o.common.threads, plainBlend);
+    double sum = 0.0, sumPlain = 0.0;
     size_t n = 0;
     for (size_t i = 0; i < points.size(); ++i)
-      if (nearWall[i]) sum += row.error.perPoint[i], ++n;
+      if (nearWall[i]) sum += row.error.perPoint[i], sumPlain += row.plain.perPoint[i], ++n;
     row.nearWall = n ? float(sum / double(n)) : 0.0f;
+    row.nearWallPlain = n ? float(sumPlain / double(n)) : 0.0f;
     row.crossing = countCellsCrossingGeometry(tracer, *set);
     row.seconds = seconds;
     return row;
   };
 
   std::vector<Row> rows;
+  {
+    Row r;
+    r.method = "noise (rebake)";
+    r.error = r.plain = noise;
+    double sum = 0.0;
+    size_t n = 0;
+    for (size_t i = 0; i < points.size(); ++i)
+      if (nearWall[i]) sum += noise.perPoint[i], ++n;
+    r.nearWall = r.nearWallPlain = n ? float(sum / double(n)) : 0.0f;
+    rows.push_back(std::move(r));
+  }
   auto t0 = std::chrono::steady_clock::now();
   Result<std::vector<vec3>> grid =
       uniformGridPositions(scene, tracer, volumes, uint32_t(o.count), settings.validity,
@@ -308,6 +388,25 @@ int runCompare(const CompareOptions& o) {
   std::optional<Row> gridRow = evaluate("uniform grid", *grid, gridSeconds);
   if (!gridRow) return kExitBadInput;
   rows.push_back(*gridRow);
+
+  // Godot-style baseline at the same count: corners of the finest octree cells that touch a
+  // static triangle, the cell size searched for the count.
+  t0 = std::chrono::steady_clock::now();
+  OctreePlacementSettings octree;
+  octree.volumes = volumes;
+  octree.validity = settings.validity;
+  octree.threads = o.common.threads;
+  Result<std::vector<vec3>> corners =
+      octreeCornerPositions(scene, tracer, octree, uint32_t(o.count));
+  if (!corners) {
+    printError(o.common.scene + ": " + corners.error());
+    return kExitBadInput;
+  }
+  const double octreeSeconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::optional<Row> octreeRow = evaluate("octree corners", *corners, octreeSeconds);
+  if (!octreeRow) return kExitBadInput;
+  rows.push_back(*octreeRow);
 
   Result<ProbePlacement> placed = placeProbes(scene, tracer, settings, &cancelFlag());
   if (!placed) {
@@ -323,52 +422,69 @@ int runCompare(const CompareOptions& o) {
   if (!autoRow) return kExitBadInput;
   rows.push_back(*autoRow);
 
-  // The fewest automatic probes that reach the grid's error at its count.
-  size_t needed = 0;
-  for (size_t r = 1; r < rows.size(); ++r)
-    if (rows[r].error.mean <= gridRow->error.mean && (needed == 0 || rows[r].count < needed))
-      needed = rows[r].count;
-
   std::ostringstream table;
   table << "scene: " << o.common.scene << ", " << points.size()
-        << " random valid points, truth and probes baked with " << o.evalRays << " rays\n";
-  table << std::left << std::setw(20) << "method" << std::right << std::setw(7) << "probes"
-        << std::setw(10) << "mean" << std::setw(10) << "p95" << std::setw(10) << "max"
-        << std::setw(11) << "near-wall" << std::setw(14) << "crossing-tets" << std::setw(10)
-        << "seconds" << "\n";
+        << " random valid points, truth and probes baked with " << o.evalRays
+        << " rays; automatic placement scored with "
+        << (settings.bake.visibilityResolution > 0
+                ? "the visibility-weighted blend (" +
+                      std::to_string(settings.bake.visibilityResolution) + " x " +
+                      std::to_string(settings.bake.visibilityResolution) + " maps)"
+                : std::string("the plain blend (--visibility-resolution 0)"))
+        << "\n";
+  table << std::left << std::setw(27) << "" << std::setw(41) << "  with visibility (runtime default)"
+        << std::setw(41) << "  plain blend" << "\n";
+  table << std::left << std::setw(20) << "method" << std::right << std::setw(7) << "probes";
+  for (int k = 0; k < 2; ++k)
+    table << std::setw(10) << "mean" << std::setw(10) << "p95" << std::setw(10) << "max"
+          << std::setw(11) << "near-wall";
+  table << std::setw(14) << "crossing-tets" << std::setw(10) << "seconds" << "\n";
   std::ostringstream csv;
-  csv << "scene,method,probes,mean,p95,max,near_wall_mean,crossing_cells,inner_cells,seconds\n";
+  csv << "scene,method,probes,mean,p95,max,near_wall_mean,plain_mean,plain_p95,plain_max,"
+         "plain_near_wall_mean,crossing_cells,inner_cells,seconds\n";
   for (const Row& r : rows) {
     table << std::left << std::setw(20) << r.method << std::right << std::setw(7) << r.count
-          << std::fixed << std::setprecision(4) << std::setw(10) << r.error.mean << std::setw(10)
-          << r.error.p95 << std::setw(10) << r.error.max << std::setw(11) << r.nearWall
-          << std::setw(8) << r.crossing.crossingCells << "/" << std::setw(5) << std::left
+          << std::fixed << std::setprecision(4);
+    for (const auto& [e, near] : {std::pair{&r.error, r.nearWall}, {&r.plain, r.nearWallPlain}})
+      table << std::setw(10) << e->mean << std::setw(10) << e->p95 << std::setw(10) << e->max
+            << std::setw(11) << near;
+    table << std::setw(8) << r.crossing.crossingCells << "/" << std::setw(5) << std::left
           << r.crossing.innerCells << std::right << std::setprecision(1) << std::setw(10)
           << r.seconds << "\n";
     csv << std::filesystem::path(o.common.scene).filename().string() << "," << r.method << ","
         << r.count << "," << r.error.mean << "," << r.error.p95 << "," << r.error.max << ","
-        << r.nearWall << "," << r.crossing.crossingCells << "," << r.crossing.innerCells << ","
-        << r.seconds << "\n";
+        << r.nearWall << "," << r.plain.mean << "," << r.plain.p95 << "," << r.plain.max << ","
+        << r.nearWallPlain << "," << r.crossing.crossingCells << "," << r.crossing.innerCells
+        << "," << r.seconds << "\n";
   }
-  if (needed) {
-    table << "automatic placement reaches the grid's mean error (" << std::setprecision(4)
-          << gridRow->error.mean << " at " << gridRow->count << " probes) with " << needed
-          << " probes (" << std::setprecision(2) << double(needed) / double(gridRow->count)
-          << " of the grid's count)\n";
-  } else {
-    table << "no automatic probe set reached the grid's mean error\n";
+  // The fewest automatic probes that reach the grid's error at its count, per blend.
+  for (bool visibility : {true, false}) {
+    const size_t needed = countToMatch(rows, *gridRow, visibility);
+    const float gridMean = visibility ? gridRow->error.mean : gridRow->plain.mean;
+    table << (visibility ? "visibility-weighted: " : "plain: ");
+    if (needed) {
+      table << "automatic placement reaches the grid's mean error (" << std::setprecision(4)
+            << gridMean << " at " << gridRow->count << " probes) with " << needed
+            << " probes (" << std::setprecision(2) << double(needed) / double(gridRow->count)
+            << " of the grid's count)\n";
+    } else {
+      table << "no automatic probe set reached the grid's mean error (" << std::setprecision(4)
+            << gridMean << ")\n";
+    }
   }
   std::cout << table.str();
   if (!o.pointsCsv.empty()) {
     std::ostringstream pc;
     pc << "x,y,z,near_wall,truth_rms";
     for (const Row& r : rows) pc << "," << r.method << " " << r.count;
+    for (const Row& r : rows) pc << "," << r.method << " " << r.count << " plain";
     pc << "\n";
     pc << std::setprecision(6);
     for (size_t i = 0; i < points.size(); ++i) {
       pc << points[i].x << "," << points[i].y << "," << points[i].z << "," << int(nearWall[i])
          << "," << irradianceRms(truth[i]);
       for (const Row& r : rows) pc << "," << r.error.perPoint[i];
+      for (const Row& r : rows) pc << "," << r.plain.perPoint[i];
       pc << "\n";
     }
     if (Status s = writeTextFileAtomically(o.pointsCsv, pc.str()); !s) {
@@ -407,23 +523,31 @@ void registerProbesPlaceCommand(CLI::App& probes) {
   auto compare = std::make_shared<CompareOptions>();
   CLI::App* c = probes.add_subcommand(
       "compare-placement",
-      "Automatic placement against a uniform grid: interpolated irradiance error at random "
-      "valid points, at equal counts and the count automatic needs to match the grid");
+      "Automatic placement against a uniform grid and Godot-style octree corners: "
+      "interpolated irradiance error at random valid points, with the visibility-weighted "
+      "blend (the runtime's default) and the plain blend of the same probes, at equal counts "
+      "and the count automatic needs to match the grid");
   addCommonOptions(c, &compare->common);
-  c->add_option("--count", compare->count, "Probe count of the grid (and the budget)")
+  c->add_option("--count", compare->count,
+                "Probe count of the grid and the octree corners (and the automatic budget)")
       ->check(CLI::Range(4, 1 << 20))
       ->capture_default_str();
   c->add_option("--points", compare->points, "Random valid evaluation points")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
-  c->add_option("--eval-rays", compare->evalRays, "Rays per probe and per evaluation point")
+  c->add_option("--eval-rays", compare->evalRays,
+                "Rays per probe and per evaluation point (the probes also record visibility "
+                "maps, at --visibility-resolution or 16 when that is 0)")
       ->check(CLI::Range(1, 1 << 24))
       ->capture_default_str();
   c->add_option("--eval-seed", compare->evalSeed,
                 "Seed of the evaluation points and their truth (default: --seed)");
-  c->add_option("--csv", compare->csv, "Also write the table as CSV");
+  c->add_option("--csv", compare->csv,
+                "Also write the table as CSV (mean, p95, max, near_wall_mean with visibility; "
+                "plain_* without)");
   c->add_option("--points-csv", compare->pointsCsv,
-                "Also write every evaluation point's error per method as CSV");
+                "Also write every evaluation point's error per method as CSV (a column per "
+                "method with visibility, then one per method with the plain blend)");
   c->callback(commandCallback([compare]() { return runCompare(*compare); }));
 }
 

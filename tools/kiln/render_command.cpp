@@ -1,7 +1,8 @@
 // render_command.cpp: `kiln render`, the preview renderer (tools/render/preview_renderer.h):
-//   kiln render SCENE --lightmaps DIR [--probes FILE.kprobe] [--camera NAME | --look-from X,Y,Z
-//       --look-at X,Y,Z --fov DEG] [--size W,H] [--spheres FILE] [--exposure EV]
-//       [--mode preview|reference] [--samples N] [--linear FILE.exr] --out image.png
+//   kiln render SCENE --lightmaps DIR [--probes FILE.kprobe [--probe-blend plain|visibility]]
+//       [--camera NAME | --look-from X,Y,Z --look-at X,Y,Z --fov DEG] [--size W,H] [--spheres FILE]
+//       [--exposure EV] [--mode preview|reference] [--samples N] [--linear FILE.exr]
+//       --out image.png
 //   kiln render --compare A.png B.png --out DIR_or_PREFIX [--diff-scale S]
 // Exit codes: 0 ok, 1 bad input (a file that cannot be read or does not fit the scene), 2 bad
 // usage, 130 interrupted (nothing written). Usage and formulas: docs/render.md.
@@ -30,6 +31,7 @@ struct RenderOptions {
   std::string scene;
   std::string lightmaps;
   std::string probes;
+  std::string probeBlend = "visibility";
   std::string camera;
   std::string lookFrom, lookAt;
   std::optional<float> fov;
@@ -186,6 +188,9 @@ int runRender(const RenderOptions& o) {
       return kExitBadInput;
     }
     probes = std::move(loaded).value();
+    // Probe-lit objects take one lookup (or an LPPV fill) with locateProbe's default blend,
+    // visibility-weighted when the file has the maps; without them it is the plain blend.
+    if (o.probeBlend == "plain") probes->visibility = ProbeVisibility{};
   }
   RenderInputs inputs;
   inputs.scene = &scene;
@@ -280,6 +285,11 @@ void registerRenderCommand(CLI::App& app) {
   r->add_option("--lightmaps", o->lightmaps,
                 "Directory written by kiln bake (manifest.json + EXR pages)");
   r->add_option("--probes", o->probes, ".kprobe file (kiln probes bake) for dynamic objects");
+  r->add_option("--probe-blend", o->probeBlend,
+                "Probe lighting: visibility (probes weighted by their visibility of the object, "
+                "when the .kprobe has it) or plain (barycentric weights alone)")
+      ->check(CLI::IsMember({"plain", "visibility"}))
+      ->capture_default_str();
   r->add_option("--camera", o->camera, "A glTF camera by name (default: the first camera)");
   r->add_option("--look-from", o->lookFrom, "Camera position X,Y,Z (with --look-at)");
   r->add_option("--look-at", o->lookAt, "Point the camera looks at X,Y,Z");

@@ -484,19 +484,21 @@ void weightByVisibility(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc,
   // The biased point: off the surface along its normal (when the caller gives one).
   const glm::vec3 q = p + blend.normal * blend.normalBias;
   if (!(std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z))) return;
-  float w[4];
-  float sum = 0.0f;
-  for (int k = 0; k < 4; ++k) {
-    w[k] = loc.barycentric[k];
-    if (w[k] == 0.0f) continue;
-    const int32_t i = loc.probes[k];
-    w[k] *= probeVisibility(vis.probe(i), vis.resolution, vis.maxDistance[size_t(i)],
-                            q - s.positions[size_t(i)], blend);
-    sum += w[k];
-  }
+  // Each weight as its own value (not an array the compiler packs through memory for the
+  // division: four scalar stores read back as one vector stall the store forwarding).
+  auto weight = [&](int k) {
+    const float b = loc.barycentric[size_t(k)];
+    if (b == 0.0f) return 0.0f;
+    const int32_t i = loc.probes[size_t(k)];
+    return b * probeVisibility(vis.probe(i), vis.resolution, vis.maxDistance[size_t(i)],
+                               q - s.positions[size_t(i)], blend);
+  };
+  const float w0 = weight(0), w1 = weight(1), w2 = weight(2), w3 = weight(3);
+  const float sum = ((w0 + w1) + w2) + w3;
   // Every v >= kVisibilityFloor > 0 and the barycentric weights sum to 1, so sum > 0.
   if (!(sum > 0.0f)) return;
-  for (int k = 0; k < 4; ++k) loc.weights[k] = w[k] / sum;
+  const float inverse = 1.0f / sum;
+  loc.weights = {w0 * inverse, w1 * inverse, w2 * inverse, w3 * inverse};
 }
 
 ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept {

@@ -129,7 +129,7 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   if (hd.version >= 2) {
     expected += kOcclusionLightsBytes + hd.probeCount * kOcclusionBytesPerProbe;
   }
-  if (vr != 0) expected += hd.probeCount * (4 + uint64_t(vr) * vr * 2 * 2);
+  if (vr != 0) expected += hd.probeCount * (4 + uint64_t(vr) * vr * kVisibilityValuesPerTexel * 2);
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
                           " bytes but its header counts need " + std::to_string(expected) +
@@ -153,8 +153,7 @@ void take(const uint8_t*& p, std::vector<T>& v, size_t count) {
 }
 
 // The visibility block: a resolution the format allows, one maxDistance and one map per probe,
-// and moments a distribution can have (mean and mean square in [0, 1], the mean square not
-// below the squared mean beyond unorm16 rounding).
+// and spreads that values in [0, 1] can have.
 Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view name) {
   if (v.resolution == 0) {
     if (!v.maxDistance.empty() || !v.moments.empty())
@@ -169,11 +168,11 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
   if (v.maxDistance.size() != np)
     return fail(name, "visibilityMaxDistance: size differs from positions");
   if (v.moments.size() != np * v.valuesPerProbe())
-    return fail(name, "visibilityMoments: size differs from probeCount x resolution^2 x 2");
-  // Rounding each of mean and mean square to 1/65535 can put the mean square below the squared
-  // mean by at most about 3 steps; anything further is not a distribution.
-  constexpr double kTolerance = 4.0 / 65535.0;
-  const size_t texels = v.valuesPerProbe() / 2;
+    return fail(name, "visibilityMoments: size differs from probeCount x resolution^2 x 3");
+  // sigma is an RMS of fractions of D about a fit through them: above 1/2 it is no spread of
+  // values in [0, 1].
+  constexpr uint16_t kMaxSigma = 32768;  // 1/2 rounded up to unorm16
+  const size_t texels = v.valuesPerProbe() / kVisibilityValuesPerTexel;
   for (size_t i = 0; i < np; ++i) {
     const float d = v.maxDistance[i];
     if (!(std::isfinite(d) && d > 0.0f)) {
@@ -181,11 +180,9 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
                             "]: not a finite distance > 0");
     }
     for (size_t t = 0; t < texels; ++t) {
-      const double mean = v.moments[2 * (i * texels + t)] / 65535.0;
-      const double meanSquare = v.moments[2 * (i * texels + t) + 1] / 65535.0;
-      if (meanSquare + kTolerance < mean * mean) {
+      if (v.moments[kVisibilityValuesPerTexel * (i * texels + t) + 1] > kMaxSigma) {
         return fail(name, "visibilityMoments[" + std::to_string(i) + "][" + std::to_string(t) +
-                              "]: mean square below the squared mean");
+                              "]: spread above half the distance range");
       }
     }
   }

@@ -33,13 +33,51 @@ inline int32_t wrapTexel(int32_t i, int32_t j, int32_t r) {
 }
 
 constexpr float kUnorm16 = 1.0f / 65535.0f;
+// The reach factor of a point beyond every ray of its texels: tiny, not 0, so that a cell
+// whose probes are all hidden still weights them by how hidden each is.
+constexpr float kHiddenReach = 1e-12f;
+
+// octahedralFootprint, inline so that probeVisibility (four calls per lookup) keeps the texels
+// in registers.
+inline OctahedralFootprint footprint(glm::vec2 uv, int32_t r) {
+  // Continuous texel coordinates: texel i's centre is at i + 0.5. Clamped so that NaN goes
+  // to 0 (std::clamp passes it through to the int conversion below: undefined, and texel
+  // indices far outside the map), so a NaN coordinate reads the map's first column or row;
+  // std::max(0, v) is that (and one maxss; std::fmax is a library call here).
+  const float fr = float(r);
+  const float x = std::min(std::max(0.0f, (uv.x + 1.0f) * 0.5f * fr), fr) - 0.5f;
+  const float y = std::min(std::max(0.0f, (uv.y + 1.0f) * 0.5f * fr), fr) - 0.5f;
+  // floor(x) for x >= -0.5 (as here): truncation, or -1 below 0 (std::floor is a library call
+  // or a long SSE2 sequence without SSE4.1's roundss).
+  const int32_t i = x < 0.0f ? -1 : int32_t(x), j = y < 0.0f ? -1 : int32_t(y);
+  const float tx = x - float(i), ty = y - float(j);
+  OctahedralFootprint f;
+  if (i >= 0 && j >= 0 && i + 1 < r && j + 1 < r) {
+    // Inside the map (all but a half-texel border): no wrapping.
+    f.texel[0] = j * r + i;
+    f.texel[1] = f.texel[0] + 1;
+    f.texel[2] = f.texel[0] + r;
+    f.texel[3] = f.texel[2] + 1;
+  } else {
+    f.texel[0] = wrapTexel(i, j, r);
+    f.texel[1] = wrapTexel(i + 1, j, r);
+    f.texel[2] = wrapTexel(i, j + 1, r);
+    f.texel[3] = wrapTexel(i + 1, j + 1, r);
+  }
+  f.weight[0] = (1.0f - tx) * (1.0f - ty);
+  f.weight[1] = tx * (1.0f - ty);
+  f.weight[2] = (1.0f - tx) * ty;
+  f.weight[3] = tx * ty;
+  return f;
+}
 
 }  // namespace
 
 glm::vec2 octahedralEncode(glm::vec3 d) noexcept {
   const float l1 = std::fabs(d.x) + std::fabs(d.y) + std::fabs(d.z);
   if (!(l1 > 0.0f)) return glm::vec2(0.0f);
-  glm::vec2 p(d.x / l1, d.y / l1);
+  const float inv = 1.0f / l1;  // one division for both coordinates
+  glm::vec2 p(d.x * inv, d.y * inv);
   if (d.z < 0.0f) {
     p = glm::vec2((1.0f - std::fabs(p.y)) * signNotZero(p.x),
                   (1.0f - std::fabs(p.x)) * signNotZero(p.y));
@@ -58,44 +96,42 @@ glm::vec3 octahedralDecode(glm::vec2 uv) noexcept {
 }
 
 OctahedralFootprint octahedralFootprint(glm::vec2 uv, int32_t r) noexcept {
-  // Continuous texel coordinates: texel i's centre is at i + 0.5.
-  const float x = std::clamp((uv.x + 1.0f) * 0.5f * float(r), 0.0f, float(r)) - 0.5f;
-  const float y = std::clamp((uv.y + 1.0f) * 0.5f * float(r), 0.0f, float(r)) - 0.5f;
-  const float fx = std::floor(x), fy = std::floor(y);
-  const int32_t i = int32_t(fx), j = int32_t(fy);
-  const float tx = x - fx, ty = y - fy;
-  OctahedralFootprint f;
-  f.texel[0] = wrapTexel(i, j, r);
-  f.texel[1] = wrapTexel(i + 1, j, r);
-  f.texel[2] = wrapTexel(i, j + 1, r);
-  f.texel[3] = wrapTexel(i + 1, j + 1, r);
-  f.weight[0] = (1.0f - tx) * (1.0f - ty);
-  f.weight[1] = tx * (1.0f - ty);
-  f.weight[2] = (1.0f - tx) * ty;
-  f.weight[3] = tx * ty;
-  return f;
+  return footprint(uv, r);
 }
 
 float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDistance,
                       glm::vec3 offset, const ProbeBlendSettings& s) noexcept {
   const float length = std::sqrt(glm::dot(offset, offset));
   if (!(length > 0.0f) || !(maxDistance > 0.0f) || r <= 0) return 1.0f;
-  const float d = std::clamp((length - s.distanceBias) / maxDistance, 0.0f, 1.0f);
-  const OctahedralFootprint f = octahedralFootprint(octahedralEncode(offset / length), r);
-  float mean = 0.0f, meanSquare = 0.0f;
+  const float inverseD = 1.0f / maxDistance;
+  const float d = std::clamp((length - s.distanceBias) * inverseD, 0.0f, 1.0f);
+  // The octahedral map is scale-invariant (it divides by the L1 norm), so the offset goes in
+  // as it is: normalizing it first would put a division on the lookup's critical path for a
+  // change in the last bit.
+  const OctahedralFootprint f = footprint(octahedralEncode(offset), r);
+  // Depth and variance are interpolated separately: a tilted wall's depth changes by a lot
+  // between neighbouring texels, and the spread of those texel values (what interpolating the
+  // second moment would add) is no uncertainty about where the wall is along this direction.
+  float mean = 0.0f, variance = 0.0f, far = 0.0f;
   for (int k = 0; k < 4; ++k) {
-    const size_t t = 2 * size_t(f.texel[k]);
-    mean += f.weight[k] * float(moments[t]);
-    meanSquare += f.weight[k] * float(moments[t + 1]);
+    const uint16_t* texel = &moments[3 * size_t(f.texel[k])];
+    const float sigma = float(texel[1]);
+    mean += f.weight[k] * float(texel[0]);
+    variance += f.weight[k] * (sigma * sigma);
+    far += f.weight[k] * float(texel[2]);
   }
   mean *= kUnorm16;
-  meanSquare *= kUnorm16;
-  if (d <= mean) return 1.0f;
-  const float minSigma = s.minSigma / maxDistance;
-  const float variance = std::max(meanSquare - mean * mean, minSigma * minSigma);
+  far *= kUnorm16;
+  const float minSigma = s.minSigma * inverseD;
+  // Beyond the farthest any of the texels' rays went, every ray stopped short of the point:
+  // hidden, whatever a wide (e.g. two-surface) distribution lets Chebyshev's bound say. The
+  // cut is a ramp minSigma wide, so v stays continuous in d.
+  const float reach = std::clamp(1.0f - (d - far) / minSigma, kHiddenReach, 1.0f);
+  if (d <= mean) return std::max(reach, kVisibilityFloor);
+  variance = std::max(variance * (kUnorm16 * kUnorm16), minSigma * minSigma);
   const float excess = d - mean;
   const float chebyshev = variance / (variance + excess * excess);
-  return std::max(chebyshev * chebyshev * chebyshev, kVisibilityFloor);
+  return std::max(chebyshev * chebyshev * chebyshev * reach, kVisibilityFloor);
 }
 
 }  // namespace kiln

@@ -73,16 +73,20 @@ struct ProbeSeedGrid {
 inline constexpr int kProbeOcclusionChannels = 4;
 
 // Per-probe visibility for leak-free blending (kiln/probe_visibility.h): for probe i, an
-// octahedral map of resolution x resolution texels, each {mean, mean square} of the distance
-// to the first hit along the probe's bake rays, divided by maxDistance[i] (resp. its square)
-// and stored as unorm16 (value / 65535). resolution 0 = no visibility (plain blending).
+// octahedral map of resolution x resolution texels, each {mu, sigma, far}: the depth of the
+// first surface at the texel's centre direction, the RMS spread about the texel's plane fit,
+// and the largest depth any of the texel's rays reached, all as fractions of maxDistance[i],
+// stored as unorm16 (value / 65535). resolution 0 = no visibility (plain blending).
+inline constexpr size_t kVisibilityValuesPerTexel = 3;
 struct ProbeVisibility {
   int32_t resolution = 0;
   std::vector<float> maxDistance;  // per probe, metres (> 0)
-  std::vector<uint16_t> moments;   // probeCount x resolution^2 x 2, probe-major
+  std::vector<uint16_t> moments;   // probeCount x resolution^2 x 3, probe-major
 
   bool empty() const { return resolution == 0; }
-  size_t valuesPerProbe() const { return 2 * size_t(resolution) * size_t(resolution); }
+  size_t valuesPerProbe() const {
+    return kVisibilityValuesPerTexel * size_t(resolution) * size_t(resolution);
+  }
   std::span<const uint16_t> probe(int32_t i) const {
     return {moments.data() + size_t(i) * valuesPerProbe(), valuesPerProbe()};
   }
@@ -119,8 +123,8 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 // Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
 // symmetric, values finite, occlusion empty or one entry per probe in [0, 1], channel lights
 // >= -1, visibility empty or a resolution in [kMinVisibilityResolution,
-// kMaxVisibilityResolution] with one finite maxDistance > 0 and one map per probe whose mean
-// squares are not below the squared means. Messages read "<name>: <field>[i]: problem". Safe for untrusted
+// kMaxVisibilityResolution] with one finite maxDistance > 0 and one map per probe whose
+// spreads are at most 1/2 (no distribution on [0, 1] spreads more). Messages read "<name>: <field>[i]: problem". Safe for untrusted
 // data.
 Status validateProbeSet(const ProbeSet& set, std::string_view name);
 
@@ -136,7 +140,8 @@ Status validateProbeSet(const ProbeSet& set, std::string_view name);
 //     from version 2 on: i32 occlusionLights[4] (scene light per shadowmask channel, -1
 //     unused), f32 occlusion[probeCount][4] (each in [0, 1]; unused channels 1),
 //     from version 3 on, when visibilityResolution R > 0: f32 visibilityMaxDistance
-//     [probeCount], u16 visibilityMoments[probeCount][R * R][2] (see ProbeVisibility);
+//     [probeCount], u16 visibilityMoments[probeCount][R * R][3] ({mu, sigma, far}, see
+//     ProbeVisibility);
 //   where outerCount = cellCount - innerCellCount.
 // Version 1 is version 2 without the occlusion block, version 2 is version 3 without
 // visibility; the reader accepts all three and gives a version 1 file occlusion 1 in every

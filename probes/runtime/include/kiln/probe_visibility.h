@@ -1,25 +1,35 @@
 // probe_visibility.h: per-probe visibility (depth moments over an octahedral map) and the
 // Chebyshev weight that keeps probe blending from leaking light through walls.
 //
-// Every probe stores, for each direction texel of an R x R octahedral map, the mean and the
-// mean square of the distance its bake rays travelled before their first hit (clamped to a
-// per-probe maxDistance D, a ray that hits nothing counting as D), both divided by D (resp.
-// D^2) and stored as unorm16. At run time the weight of probe k for a point p is its
+// Every probe stores, for each direction texel of an R x R octahedral map, where the first
+// surface lies along the texel's directions and how much that varies inside the texel: from the
+// probe bake's rays, s = min(t, D) / D with t the distance to the first hit (a ray that hits
+// nothing counts as D; D is the probe's maxDistance) is fitted per texel by a plane in the
+// map's coordinates (least squares over the texel's rays); the fit's value at the texel centre
+// (mu), the RMS of the residual (sigma) and the largest s of the texel's rays (far) are stored
+// as unorm16. The plane removes the trend of a tilted wall across the texel, so sigma measures
+// depth edges and noise, not the tilt. At run time the weight of probe k for a point p is its
 // barycentric weight times
 //
-//   v_k(p) = 1                                           if d <= mu
+//   v_k(p) = c(d) * clamp(1 - (d - far) / w, 0, 1),    w = minSigma / D,
+//   c(d)   = 1                                           if d <= mu
 //          = (sigma^2 / (sigma^2 + (d - mu)^2))^3        otherwise
 //
 // where d = min(|p' - x_k| - distanceBias, D) / D is the normalized distance from the probe to
 // the biased point p' = p + normalBias * n (n: the surface normal at p, when the caller has
-// one), mu and m2 are the moments bilinearly sampled in the direction from the probe to p',
-// and sigma^2 = max(m2 - mu^2, (minSigma / D)^2). That is the one-sided Chebyshev bound on the
-// probability that the probe's rays reach distance d (variance shadow maps; DDGI, Majercik et
-// al. 2019, cubes it to sharpen the cut-off). The weights are renormalized; each v is floored
-// at kVisibilityFloor, so a point that no probe of its cell sees gets the plain barycentric
-// blend, and the blend is continuous in p (the map is sampled with octahedral wrapping, the
-// test is continuous in d and mu, and a face shared by two cells has the same three probes
-// with the same weights on both sides).
+// one), mu, sigma^2 and far are bilinearly interpolated from the four texels around the
+// direction from the probe to p', and sigma^2 is at least (minSigma / D)^2. c is the one-sided
+// Chebyshev bound on the probability that the surface along that direction lies beyond d
+// (variance shadow maps; DDGI, Majercik et al. 2019, cubes it to sharpen the cut-off); the
+// second factor hides a point beyond the farthest depth the texels' rays reached, which a
+// texel holding two surfaces (a probe next to a wall looking along it) would otherwise let
+// through with a loose bound. The
+// weights are renormalized. v never reaches 0 (the second factor bottoms out at 1e-12, v at
+// kVisibilityFloor), so a point that every probe of its cell is hidden from still gets a
+// defined blend, weighted towards the least hidden probes, and the blend is continuous in p
+// (the map
+// is sampled with octahedral wrapping, the test is continuous in d, mu and sigma, and a face
+// shared by two cells has the same three probes with the same weights on both sides).
 //
 // Only GLM: this is part of kiln_runtime.
 #pragma once
@@ -34,9 +44,10 @@ namespace kiln {
 // Smallest and largest octahedral map side a file may hold.
 inline constexpr int32_t kMinVisibilityResolution = 4;
 inline constexpr int32_t kMaxVisibilityResolution = 64;
-// v_k never falls below this: the blend stays defined (and continuous) when every probe of the
-// cell is hidden from the point, and then equals the barycentric blend.
-inline constexpr float kVisibilityFloor = 1e-6f;
+// v_k never falls below this (far below any v the test gives, about 1e-29 at its smallest):
+// the renormalized blend stays defined and continuous when every probe of the cell is hidden
+// from the point, weighted by how hidden each is (equal floors give the barycentric blend).
+inline constexpr float kVisibilityFloor = 1e-30f;
 
 // How a lookup blends the probes of the cell around a point.
 struct ProbeBlendSettings {
@@ -74,7 +85,7 @@ struct OctahedralFootprint {
 OctahedralFootprint octahedralFootprint(glm::vec2 uv, int32_t resolution) noexcept;
 
 // The Chebyshev visibility v (see the file comment) of a probe's map `moments` (resolution^2
-// texels x {mean, mean square}, unorm16) for a point at `offset` = p' - probe position (metres,
+// texels x {mu, sigma, far}, unorm16) for a point at `offset` = p' - probe position (metres,
 // before distanceBias), with maxDistance D.
 float probeVisibility(std::span<const uint16_t> moments, int32_t resolution, float maxDistance,
                       glm::vec3 offset, const ProbeBlendSettings& settings) noexcept;
