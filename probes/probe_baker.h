@@ -45,7 +45,7 @@ namespace kiln {
 inline constexpr int kDefaultProbeBounces = 16;
 // Side of the per-probe visibility map a bake stores by default (docs/probes.md, "Leak-free
 // blending", says why).
-inline constexpr int32_t kDefaultVisibilityResolution = 24;
+inline constexpr int32_t kDefaultVisibilityResolution = 32;
 
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
@@ -76,7 +76,8 @@ struct ProbeBakeSettings {
   bool dering = true;
   // Per-probe visibility for leak-free blending (kiln/probe_visibility.h): the side of each
   // probe's octahedral depth-moment map, 0 = none (plain barycentric blending at run time).
-  // 24 x 24 (3.4 KB per probe) by the leak-error chart in docs/charts.md (chart 6).
+  // 32 x 32 (6 KB per probe): smaller texels leak at silhouettes (docs/probes.md, "Why these
+  // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
   // Distance (metres) the moments are clamped to; 0 = per probe, the longest edge of its
   // cells (visibilityMaxDistances).

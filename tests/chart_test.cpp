@@ -4,8 +4,9 @@
 // closer to brute-force integration than L1 (orthogonality of the SH bands), deringed L2
 // irradiance is never negative, TetGen and CGAL build the same Delaunay tetrahedralization,
 // every lookup method finds the tetrahedron brute force finds, per-probe visibility stops the
-// light that plain blending leaks through two_rooms' sunlit wall. PNGs exist when gnuplot is
-// installed; without gnuplot the CSVs are written and the exit code names the package.
+// light that plain blending leaks through the sunlit wall of two_rooms and two_rooms_thin.
+// PNGs exist when gnuplot is installed; without gnuplot the CSVs are written and the exit code
+// names the package.
 // No timing is asserted (timings are only required to be positive).
 #include <gtest/gtest.h>
 
@@ -240,41 +241,58 @@ TEST(Chart, VisibilityMapsStopTheLeakThroughTheWall) {
   const Csv csv = runChart("visibility", "probe_visibility");
   EXPECT_EQ(csv.columns,
             (std::vector<std::string>{
-                "probe_set", "probes", "resolution", "visibility_bytes_per_probe",
-                "file_bytes_per_probe", "near_wall_mean_error", "near_wall_p95_error",
-                "near_wall_leaking", "overall_mean_error", "overall_p95_error", "bake_seconds"}));
-  std::map<std::string, std::map<int, size_t>> row;  // probe set -> resolution -> row
+                "scene", "probe_set", "probes", "probe_rays", "resolution",
+                "visibility_bytes_per_probe", "file_bytes_per_probe", "near_wall_points",
+                "near_wall_over_bound", "near_wall_worst_leak_ratio", "near_wall_mean_error",
+                "near_wall_p95_error", "overall_mean_error", "overall_p95_error", "bake_seconds"}));
+  // scene -> probe set -> resolution -> row
+  std::map<std::string, std::map<std::string, std::map<int, size_t>>> row;
   for (size_t r = 0; r < csv.rows.size(); ++r)
-    row[csv.at(r, "probe_set")][int(csv.num(r, "resolution"))] = r;
-  ASSERT_EQ(row.size(), 2u);
-  for (const auto& [set, byResolution] : row) {
-    ASSERT_EQ(byResolution.size(), 3u) << set;  // --quick: 0, 8, 16
-    const size_t plain = byResolution.at(0), r8 = byResolution.at(8), r16 = byResolution.at(16);
-    // The format: 4 bytes of maxDistance and R^2 texels of two unorm16 moments per probe, and
-    // nothing else differs between the files.
-    for (const auto& [r, i] : byResolution) {
-      const double bytes = r > 0 ? 4.0 + 4.0 * r * r : 0.0;
-      EXPECT_EQ(csv.num(i, "visibility_bytes_per_probe"), bytes) << set << " R " << r;
-      EXPECT_NEAR(csv.num(i, "file_bytes_per_probe") - csv.num(plain, "file_bytes_per_probe"),
-                  bytes, 0.01)  // the CSV has 6 significant digits
-          << set << " R " << r;
+    row[csv.at(r, "scene")][csv.at(r, "probe_set")][int(csv.num(r, "resolution"))] = r;
+  ASSERT_EQ(row.size(), 2u);  // two_rooms and two_rooms_thin
+  for (const auto& [scene, sets] : row) {
+    // Scene probes, uniform grid, octree corners at the chart's rays (--quick: 2048) and at 1024.
+    ASSERT_EQ(sets.size(), 4u) << scene;
+    for (const auto& [set, byResolution] : sets) {
+      const std::string name = scene + ", " + set;
+      ASSERT_EQ(byResolution.size(), 3u) << name;  // --quick: 0, 16, 24
+      const size_t plain = byResolution.at(0), r24 = byResolution.at(24);
+      // The format: 4 bytes of maxDistance and R^2 texels of three unorm16 values ({mu,
+      // sigma, far}) per probe, and nothing else differs between the files.
+      for (const auto& [r, i] : byResolution) {
+        const double bytes = r > 0 ? 4.0 + 6.0 * r * r : 0.0;
+        EXPECT_EQ(csv.num(i, "visibility_bytes_per_probe"), bytes) << name << " R " << r;
+        EXPECT_NEAR(csv.num(i, "file_bytes_per_probe") - csv.num(plain, "file_bytes_per_probe"),
+                    bytes, 0.01)  // the CSV has 6 significant digits
+            << name << " R " << r;
+        EXPECT_GT(csv.num(i, "bake_seconds"), 0.0);
+      }
+      // 100 points are drawn (--quick); those whose mirror in room A is not a valid point are
+      // dropped (measured: none).
+      const double points = csv.num(plain, "near_wall_points");
+      EXPECT_GE(points, 90.0) << name;
+      EXPECT_LE(points, 100.0) << name;
+      EXPECT_EQ(csv.num(plain, "probe_rays"), set == "octree corners at 1024 rays" ? 1024 : 2048)
+          << name;
+      // Plain blending carries sunlit room A's light into room B through the cells that span
+      // the wall: measured 43-100 of the 100 near-wall points over the bound (2 x the
+      // truth + 1% of the room-A mirror point's), the worst 60-1100x it, mean field errors
+      // 6-150 floors.
+      EXPECT_GE(csv.num(plain, "near_wall_over_bound"), points / 4.0) << name;
+      EXPECT_GT(csv.num(plain, "near_wall_worst_leak_ratio"), 10.0) << name;
+      // 24 x 24 maps (the default): no point over the bound; the worst measured is 2e-12 of it
+      // on every set (at 16 x 16 the thin wall's silhouettes still let 15x through). This holds
+      // at --quick's 2048 rays per probe; the full chart's 16384 finds a few points over it
+      // beside the thin wall (docs/charts.md, chart 6).
+      EXPECT_EQ(csv.num(r24, "near_wall_over_bound"), 0.0) << name;
+      EXPECT_LT(csv.num(r24, "near_wall_worst_leak_ratio"), 0.1) << name;
+      // The field error near the wall falls to the field's own (measured 0.42-0.61 against
+      // 6.2-150 without maps: at most 0.07x), and over both rooms the maps do not trade the
+      // leak for errors elsewhere (measured 0.58-1.0 against 1.5-15, at most 0.44x).
+      EXPECT_LT(csv.num(r24, "near_wall_mean_error"), 0.2 * csv.num(plain, "near_wall_mean_error"))
+          << name;
+      EXPECT_LT(csv.num(r24, "overall_mean_error"), csv.num(plain, "overall_mean_error")) << name;
     }
-    // Plain blending carries sunlit room A's light into room B through the cells that span
-    // the wall: measured mean errors 24-41 (tens of times 5% of the scene's light), 80-100 of
-    // the 100 near-wall points (--quick) off by more than the floor. 16 x 16 maps cut that to
-    // 0.23-0.28 with 1 leaking point; a factor 10 and 10 points are far inside those margins.
-    EXPECT_GT(csv.num(plain, "near_wall_mean_error"), 5.0) << set;
-    EXPECT_GE(csv.num(plain, "near_wall_leaking"), 50.0) << set;
-    EXPECT_LT(csv.num(r16, "near_wall_mean_error"), 0.1 * csv.num(plain, "near_wall_mean_error"))
-        << set;
-    EXPECT_LE(csv.num(r16, "near_wall_leaking"), 10.0) << set;
-    // Finer maps separate the wall from the doorway beside it (measured 8 x 8: 0.67-1.6).
-    EXPECT_LT(csv.num(r16, "near_wall_mean_error"), csv.num(r8, "near_wall_mean_error")) << set;
-    // Over both rooms the maps do not trade the leak for errors elsewhere (measured 0.54-0.58
-    // with maps against 0.55-1.07 without).
-    EXPECT_LT(csv.num(r16, "overall_mean_error"), 1.2 * csv.num(plain, "overall_mean_error"))
-        << set;
-    for (const auto& [r, i] : byResolution) EXPECT_GT(csv.num(i, "bake_seconds"), 0.0);
   }
 }
 

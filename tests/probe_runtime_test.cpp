@@ -366,16 +366,18 @@ ProbeSet smallSet() {
   return build(pts, DelaunayBackend::TetGen);
 }
 
-// smallSet() with a visibility block (version 3): 4 x 4 maps of varied valid moments.
+// smallSet() with a visibility block (version 3): 4 x 4 maps of varied valid texels
+// {mu, sigma <= 1/2, far >= mu}.
 ProbeSet smallSetWithVisibility() {
   ProbeSet s = smallSet();
   s.visibility.resolution = kMinVisibilityResolution;
   s.visibility.maxDistance.assign(size_t(s.probeCount()), 1.5f);
   s.visibility.moments.resize(size_t(s.probeCount()) * s.visibility.valuesPerProbe());
-  for (size_t t = 0; t < s.visibility.moments.size(); t += 2) {
-    const uint16_t mean = uint16_t(1000 + 97 * t);
-    s.visibility.moments[t] = mean;
-    s.visibility.moments[t + 1] = uint16_t(std::min(65535.0, mean * (mean / 65535.0) + 50.0));
+  for (size_t t = 0; t < s.visibility.moments.size(); t += kVisibilityValuesPerTexel) {
+    const uint16_t mu = uint16_t(1000 + 97 * t);
+    s.visibility.moments[t] = mu;
+    s.visibility.moments[t + 1] = uint16_t(50 + 31 * t);
+    s.visibility.moments[t + 2] = uint16_t(std::min(65535.0, mu * 1.5 + 10.0));
   }
   return s;
 }

@@ -12,6 +12,8 @@
 #include <cstdio>
 #include <map>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include "kiln/lppv_volume.h"
 #include "kiln/probe_runtime.h"
@@ -144,65 +146,6 @@ TEST(ProbeScenes, NoPlacedProbeInsideGeometryOnTheShippedScenes) {
   }
 }
 
-// two_rooms: the sun enters room A through the window and lights room A's floor and the
-// shared wall's room-A face up to 0.87 m (docs/scenes.md). Points in room B within 0.2-0.3 m
-// of the shared wall, right behind that patch, get only the light that comes round through
-// the doorway. Probes placed automatically over the rooms (a quick placement: 64-probe
-// budget, 256 check points) must give them that, not room A's light: at each point the
-// interpolated irradiance is compared with SH baked directly there (the truth) and with the
-// truth at the mirror point in room A, in front of the patch. A tetrahedron from a room-A
-// probe through the wall pulls the value towards room A's; the bake's visibility maps weight
-// such a probe down by its Chebyshev visibility (1e-6 for one a metre behind the wall).
-// Known fragility, still true with visibility: a placement that leaves these points below
-// its lowest probes (with other check points or another sampling sequence) extrapolates them
-// from an outer cell whose hull face joins probes metres apart, across the wall, and a
-// room-A probe 4 m away keeps a visibility of 0.03-0.2 through the wall in a 16 x 16 map
-// (the depth spread of a texel at that distance): ~0.01 lux, which fails the second bound
-// (docs/probe_placement.md, "What is left"; ProbeScenesWall below maps this over 128 points).
-TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
-  const Loaded l = load("two_rooms.gltf");
-  ProbePlacementSettings s = quickPlacement(64);
-  s.volumes = {kThickWall.rooms()};
-  Result<ProbePlacement> placed = placeProbes(l.scene, *l.tracer, s);
-  ASSERT_TRUE(bool(placed)) << placed.error();
-  const std::vector<vec3> positions = placed->positions();
-  ProbeBakeSettings bake;
-  bake.rays = 2048;
-  Result<ProbeSet> set = bakeProbes(l.scene, *l.tracer, positions, bake);
-  ASSERT_TRUE(bool(set)) << set.error();
-
-  std::vector<vec3> behind, mirror;
-  for (float d : {0.2f, 0.3f})
-    for (float y : {0.3f, 0.6f})
-      for (float z : {1.3f, 1.6f, 1.9f}) {
-        behind.push_back(vec3(4.25f + d, y, z));
-        mirror.push_back(vec3(4.0f - d, y, z));
-      }
-  ProbeBakeSettings truthBake = bake;
-  truthBake.rays = 8192;
-  truthBake.seed = 99;
-  const std::vector<ShL2Rgb> truthB = bakePointSh(l.scene, *l.tracer, behind, truthBake);
-  const std::vector<ShL2Rgb> truthA = bakePointSh(l.scene, *l.tracer, mirror, truthBake);
-  ASSERT_EQ(truthB.size(), behind.size());
-  for (size_t i = 0; i < behind.size(); ++i) {
-    const float eB = maxAxisIrradiance(truthB[i]);
-    const float eA = maxAxisIrradiance(truthA[i]);
-    const ProbeLocation loc = locateProbe(*set, behind[i]);
-    const float e = maxAxisIrradiance(interpolateProbes(*set, loc));
-    std::printf("(%.2f, %.2f, %.2f): interpolated %.4f, truth %.4f, room A mirror %.4f lux\n",
-                behind[i].x, behind[i].y, behind[i].z, e, eB, eA);
-    // The wall really separates light from dark here (room A is hundreds of times brighter:
-    // the test has teeth) ...
-    EXPECT_GT(eA, 100.0f * eB) << i;
-    // ... and no share of room A's light comes through it: a tetrahedron reaching a room-A
-    // probe would add a weight (tenths) x eA. What is left is room B's own dim light, which
-    // the probes give to within their and the truth's noise at these few-millilux levels.
-    EXPECT_LT(e, 0.01f * eA) << i << ": " << describeLookup(*set, behind[i], loc, kThickWall.mid());
-    EXPECT_LT(e, 2.0f * eB + 1e-3f)
-        << i << ": " << describeLookup(*set, behind[i], loc, kThickWall.mid());
-  }
-}
-
 // two_rooms, room A: a 2.2 m bar on the floor (y = 0.3, z = 1.3) from x = 1.2 (in the shade) to
 // x = 3.4 (in the sun patch). Probes on a 0.5 m lattice, direct light only. An LPPV over the
 // bar follows the light along it; one probe lookup at the bar's centre gives every pixel the
@@ -308,16 +251,25 @@ const Loaded& loaded(const WallScene& w) {
   return it->second;
 }
 
-// Probe bakes: the default integrator (16 bounces) and visibility maps (16 x 16), 1024 rays.
-const ProbeSet& bakedLayout(const WallScene& w, Layout layout) {
-  static std::map<std::pair<std::string, Layout>, ProbeSet> cache;
+const std::vector<vec3>& probePositions(const WallScene& w, Layout layout) {
+  static std::map<std::pair<std::string, Layout>, std::vector<vec3>> cache;
   const auto key = std::make_pair(std::string(w.file), layout);
+  auto it = cache.find(key);
+  if (it == cache.end()) it = cache.emplace(key, layoutPositions(loaded(w), w, layout)).first;
+  return it->second;
+}
+
+// Probe bakes: the default integrator (16 bounces) and visibility maps (the default 24 x 24),
+// 1024 rays unless told.
+const ProbeSet& bakedLayout(const WallScene& w, Layout layout, uint32_t rays = 1024) {
+  static std::map<std::tuple<std::string, Layout, uint32_t>, ProbeSet> cache;
+  const auto key = std::make_tuple(std::string(w.file), layout, rays);
   auto it = cache.find(key);
   if (it == cache.end()) {
     const Loaded& l = loaded(w);
     ProbeBakeSettings bake;
-    bake.rays = 1024;
-    Result<ProbeSet> set = bakeProbes(l.scene, *l.tracer, layoutPositions(l, w, layout), bake);
+    bake.rays = rays;
+    Result<ProbeSet> set = bakeProbes(l.scene, *l.tracer, probePositions(w, layout), bake);
     EXPECT_TRUE(bool(set)) << set.error();
     it = cache.emplace(key, set ? std::move(set).value() : ProbeSet{}).first;
   }
@@ -406,11 +358,19 @@ Ratios summarize(std::vector<float> r) {
 // bounces through the doorway, a few millilux whose bake is mostly noise (SH baked three
 // times at the same points: per-point CV 0.96 at 1024 rays, 0.26 at 16384), so that two such
 // estimates differ by more than 2x at some of 128 points with no room-A probe in the blend
-// (on two_rooms' grid the whole blend reaches 0.7-2.3x the bound with 8192 truth rays, over
-// point and bake seeds, while the part through the wall stays below 0.08x). Room A's light
-// is bright (0.2-7 lux at the mirror points; CV 5%, 10% at worst), so the check's margin is
-// set by the blend, not by noise: on two_rooms' grid, over six bake, point and truth seeds,
-// the worst point is at 0.005-0.075 of the bound.
+// (the whole blend's worst point is at 1.2-5x the bound on the grid and the octree corners,
+// over six bake and six point seeds, while the part through the wall stays below 1e-12x).
+// Room A's light is bright (0.2-7 lux at the mirror points; CV 5%, 10% at worst), so the
+// check's margin is set by the blend, not by noise. Measured with the 24 x 24 maps over six
+// bake seeds x six point seeds (these points and five other sets, truth seeds with them), the
+// worst point's share of the bound: grid 1.5e-17 (two_rooms) and 3.3e-15 (two_rooms_thin);
+// placement 1.1e-3 and 0.22; octree corners 1.2e-13, and on two_rooms_thin 2.2e-4 for all
+// point sets but one, at which it is 7.5-26x in every bake (a room-B corner by the end wall,
+// (4.19, 2.89, 0.13), outside the hull: its three probes are all hidden from it, 4 m away
+// along the wall, and the relative floor gives the two in room A 44% of the weight). Other
+// placement seeds (1-7) put such points in all-hidden cells too, and on two_rooms_thin let
+// room-A probes see through the 5 cm wall where a texel spans a room corner (visibility
+// 0.2-0.4): those placements fail here, up to 42x.
 //
 // With plain barycentric blending, cells reaching from room A's probes give these points
 // tenths of room A's light (the check fails at most points on the grid); with visibility the
@@ -481,35 +441,170 @@ TEST(ProbeScenesWall, ThinWallOctreeCornersBringNoLightThroughTheWall) {
   expectNoLightThroughTheWall(kThinWall, Layout::Octree);
 }
 
+// two_rooms: the sun enters room A through the window and lights room A's floor and the
+// shared wall's room-A face up to 0.87 m (docs/scenes.md). Twelve points in room B, 0.2-0.3 m
+// behind the wall right behind that patch, get only the light that comes round through the
+// doorway: 0.002-0.005 lux (SH baked there, 4 x 16384 rays; per-point CV 0.13-0.69 even so),
+// against 1.1-7.9 lux at their mirror points in front of the patch. The probes are the quick
+// placement of ProbeScenesWall (64-probe budget), baked with 2048 rays. At each point:
+//  - No light through the wall: the part of the blend that comes from room-A probes hidden
+//    from the point (as in ProbeScenesWall; none sees these points) stays below the issue's
+//    bound, 2 x the truth + 1% of the mirror's truth. Measured over placement seeds 0-5 x six
+//    bakes: below 4e-16 of it (weights on room-A probes 1e-17 or less).
+//  - The whole blend is room B's own light: at most kRoomBNoise x the brightest truth among
+//    the point and its cell's room-B probes (SH baked at those probes' positions, 16384 rays).
+//    A blend of room B's light field holds no more than its brightest sample; what the probes
+//    add on top is their bake noise.
+// The old second bound, 2 x the point's truth + 1e-3 lux (with 1% of the mirror's truth as
+// the first), took the blend to reproduce the truth at the point to within noise, so it
+// counted room B's own interpolation error as light through the wall: the points' cells have
+// room-B probes by the doorway, 1.3-1.9 m away, where room B's light is 4-13x theirs
+// ((4.73, 0.11, 3.06): 0.021-0.026 lux), so the blend, from room B's probes alone (room A's
+// weights below 1e-20), gives 0.002-0.021 lux here: up to 5.6x the truth, 0.017 lux above it,
+// over six bakes (20x and 0.042 lux with placement seeds 1-2); at (4.55, 0.6, 1.9) it gave
+// 0.014 lux, over both old bounds (0.012).
+// This placement's cells here reach room A only at a dim probe in its far corner (1.48, 0.11,
+// 0.11; 0.08 lux), so the plain blend (no visibility) takes 0.011-0.033 lux through the wall:
+// above the points' own light at all twelve, but within the first bound, and within the
+// second at all but two. The check that the plain blend fails is ProbeScenesWall's (92 of 128
+// points over the bound there); here it only shows that the cells do span the wall.
+TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
+  // Room B's probes at 2048 rays: probe / truth at the same place up to 2.6 over eight bakes
+  // (SD 0.0007-0.008 lux), and the truths at 16384 rays vary by 2-4x between seeds at these
+  // light levels. Measured blend / brightest room-B truth: at most 2.1 over six bakes x
+  // two truth seeds, 2.25 with placement seeds 0-5.
+  constexpr float kRoomBNoise = 4.0f;
+  const WallScene& w = kThickWall;
+  const Loaded& l = loaded(w);
+  const ProbeSet& set = bakedLayout(w, Layout::Placement, 2048);
+  ASSERT_GT(set.probeCount(), 4);
+  ASSERT_FALSE(set.visibility.empty());
+  std::vector<vec3> behind, mirror;
+  for (float d : {0.2f, 0.3f})
+    for (float y : {0.3f, 0.6f})
+      for (float z : {1.3f, 1.6f, 1.9f}) {
+        behind.push_back(vec3(w.faceB + d, y, z));
+        mirror.push_back(vec3(w.faceA - d, y, z));
+      }
+  // The points and their cells' room-B probes (with a barycentric share) get SH baked with
+  // 16384 rays: room B's light there is mostly noise at fewer (per-point CV 0.13-0.69 even at
+  // 16384, over four seeds).
+  std::vector<ProbeLocation> locs;
+  std::vector<vec3> dim = behind;
+  for (const vec3& p : behind) {
+    locs.push_back(locateProbe(set, p));
+    for (int k = 0; k < 4; ++k) {
+      const vec3 x = set.positions[size_t(locs.back().probes[k])];
+      if (x.x > w.mid() && locs.back().barycentric[k] > 0.0f &&
+          std::find(dim.begin() + ptrdiff_t(behind.size()), dim.end(), x) == dim.end())
+        dim.push_back(x);
+    }
+  }
+  ProbeBakeSettings truthBake;
+  truthBake.rays = 16384;
+  truthBake.seed = 99;
+  std::vector<float> truthDim;
+  for (const ShL2Rgb& sh : bakePointSh(l.scene, *l.tracer, dim, truthBake))
+    truthDim.push_back(maxAxisIrradiance(sh));
+  // Room A's light is bright: 2048 rays keep its noise under 10%.
+  truthBake.rays = 2048;
+  std::vector<float> truthA;
+  for (const ShL2Rgb& sh : bakePointSh(l.scene, *l.tracer, mirror, truthBake))
+    truthA.push_back(maxAxisIrradiance(sh));
+  ASSERT_EQ(truthDim.size(), dim.size());
+  ASSERT_EQ(truthA.size(), mirror.size());
+  ProbeBlendSettings plain;
+  plain.visibility = false;
+  float worstLeak = 0.0f, worstBlend = 0.0f, plainLeak = 0.0f;
+  size_t plainOverTruth = 0;
+  for (size_t i = 0; i < behind.size(); ++i) {
+    const vec3 p = behind[i];
+    const ProbeLocation& loc = locs[i];
+    const float eB = truthDim[i], eA = truthA[i];
+    float roomB = eB;
+    for (int k = 0; k < 4; ++k) {
+      const auto at = std::find(dim.begin() + ptrdiff_t(behind.size()), dim.end(),
+                                set.positions[size_t(loc.probes[k])]);
+      if (at != dim.end()) roomB = std::max(roomB, truthDim[size_t(at - dim.begin())]);
+    }
+    const float e = maxAxisIrradiance(interpolateProbes(set, loc));
+    const float leak = maxAxisIrradiance(lightThroughTheWall(*l.tracer, set, p, loc, w.mid()));
+    const ProbeLocation flat = locateProbe(set, p, -1, plain);
+    const float ePlain = maxAxisIrradiance(interpolateProbes(set, flat));
+    const float leakPlain =
+        maxAxisIrradiance(lightThroughTheWall(*l.tracer, set, p, flat, w.mid()));
+    worstLeak = std::max(worstLeak, leak / (2.0f * eB + 0.01f * eA));
+    worstBlend = std::max(worstBlend, e / (kRoomBNoise * roomB));
+    plainLeak = std::max(plainLeak, leakPlain / eA);
+    plainOverTruth += leakPlain > eB ? 1 : 0;
+    std::printf(
+        "(%.2f, %.2f, %.2f): interpolated %.4f lux (through the wall %.2g), truth %.4f, room B "
+        "at most %.4f, room A mirror %.3f; plain blend %.4f (through the wall %.4f)\n",
+        p.x, p.y, p.z, e, leak, eB, roomB, eA, ePlain, leakPlain);
+    // The wall really separates light from dark here (the test has teeth) ...
+    EXPECT_GT(eA, 100.0f * eB) << i;
+    // ... no light comes through it ...
+    EXPECT_LE(leak, 2.0f * eB + 0.01f * eA) << i << ": " << describeLookup(set, p, loc, w.mid());
+    // ... and the blend holds room B's own light.
+    EXPECT_LE(e, kRoomBNoise * roomB) << i << ": " << describeLookup(set, p, loc, w.mid());
+  }
+  std::printf(
+      "worst: through the wall / bound %.2g, blend / room B bound %.3f; plain blend "
+      "through the wall up to %.2g of room A's light, above the truth at %zu points\n",
+      worstLeak, worstBlend, plainLeak, plainOverTruth);
+  // The cells span the wall: without visibility, room A's light through it exceeds the points'
+  // own (measured: at 11-12 of the 12 points, over placement seeds 0-5).
+  EXPECT_GE(plainOverTruth, behind.size() / 2);
+}
+
 // ---- continuity across cells that span the wall --------------------------------------------
 //
-// With barycentric weights b_k, visibilities v_k, u_k = b_k v_k and U = sum_k u_k, the blend of
-// the probes' irradiances E_k (one normal) is E = sum_k (u_k / U) E_k, so
-//   dE = sum_k du_k (E_k - E) / U,   |dE| <= (max_k E_k - min_k E_k) sum_k |du_k| / U,
-//   |du_k| / U <= (v_k / U) |grad b_k| |dp| + w_k |d ln v_k|          (w_k = u_k / U).
-// Barycentric: |grad b_k| is 1 / the cell's height over the face opposite probe k. Visibility
-// (kiln/probe_visibility.h): v_k is 1 for d <= mu and floored, both flat; in between
-// ln v = 3 ln c, c = s2 / (s2 + e^2), e = d - mu, s2 = max(m2 - mu^2, (minSigma / D)^2), so
-//   |d ln c| = |2 e de / (s2 + e^2) - e^2 ds2 / (s2 (s2 + e^2))| <= |de| / s + |ds2| / s2
-// (2 e / (s2 + e^2) is largest, 1 / s, at e = s). d changes by at most |dp| / D. mu and m2 are
-// bilinear in the map: their gradient in texel units is at most sqrt(2) x the range of the
-// footprint's four texels (Dmu, Dm2); texel coordinates move at most R / 2 x 1.618 per radian
-// of direction (the octahedral map's largest stretch, (1 + sqrt 5) / 2, the largest singular
+// With barycentric weights b_k, visibilities v_k, u_k = b_k v_k, U = sum_k u_k and w_k = u_k / U,
+// the blend of the probes' irradiances E_k (one normal) is E = sum_k w_k E_k, so
+//   dE = sum_k du_k (E_k - E) / U,   |dE| <= (max_k E_k - min_k E_k) sum_k |du_k| / U.
+// Visibility (kiln/probe_visibility.h): v_k = max(c_k a_k, floor), with c_k = 1 for d <= mu and
+// C^3 beyond, C = s2 / (s2 + e^2), e = d - mu, s2 = max(sigma^2, (minSigma / D)^2), and the
+// reach a_k = clamp(1 - (d - far) / w, 1e-12, 1), w = minSigma / D; mu, sigma^2 and far are
+// each bilinear in the map. Where v_k is floored it is flat; elsewhere dv_k = a_k dc_k + c_k da_k
+// and
+//   |du_k| / U <= (v_k / U) |grad b_k| |dp| + w_k |d ln c_k| + (b_k c_k / U) |da_k|.
+// Barycentric: |grad b_k| is 1 / the cell's height over the face opposite probe k.
+// Chebyshev: |d ln C| = |ds2 e^2 / (s2 (s2 + e^2)) - 2 e de / (s2 + e^2)| <= |ds2| / s2 + |de| / s
+// (2 e / (s2 + e^2) is largest, 1 / s, at e = s), and ln c = 3 ln C. d changes by at most
+// |dp| / D. A bilinear value's gradient in texel units is at most sqrt(2) x the range of the
+// footprint's four texels (Dmu, Dsigma2, Dfar; while s2 sits on its minimum it is flat, so
+// Dsigma2 over-counts there); texel coordinates move at most R / 2 x 1.618 per radian of
+// direction (the octahedral map's largest stretch, (1 + sqrt 5) / 2, the largest singular
 // value of its Jacobian, reached on the equator at the x and y axes; the wrapped seams are
 // continuous), and the direction from the probe at most |dp| / r radians (r: distance to the
 // probe). With G = sqrt(2) x 1.618 x R / (2 r) = 1.145 R / r:
-//   |d ln v_k| <= 3 [(1 / D + G Dmu) / s + G (Dm2 + 2 mu Dmu) / s2] |dp|.
-// The sum of both terms is the slope bound L(p) (per metre; normalized depths). For a maximum
-// over the six axis normals, |d max_a E_a| <= max_a |dE_a|, so the range is the largest over
-// the axes. Each 1 mm step's jump must stay below 2 x 1 mm x L x range, with L and the range
-// the larger of the step's two ends (x 2: the first-order bound varies within the step; cells
-// change at shared faces, where the blend is continuous). And a jump that is no artefact of
-// the step shrinks with it: the largest jump at 0.25 mm steps is about 1/4 of that at 1 mm
-// (a discontinuity of size J would give J at every step size).
+//   |d ln c_k| <= 3 [(1 / D + G Dmu) / s + G Dsigma2 / s2] |dp|   (0 for d <= mu).
+// Reach: flat at both clamps, and on the ramp between them |da_k| <= (|dd| + |dfar|) / w <=
+// (1 + D G Dfar) |dp| / minSigma. That ramp is steep, and the bound carries its slope 1 / w in
+// full: 1 / minSigma is 50 per metre from the distance alone, and where far jumps between
+// neighbouring texels (a silhouette: a doorway's edge with the room behind it, metres deeper)
+// D G Dfar multiplies it by tens to hundreds, so a point crossing the edge of what a probe
+// sees goes from seen to hidden within millimetres; that is the cut-off doing its job. The
+// term is written (b_k c_k / U) |da_k|, which is w_k |d ln a_k| without the division by a_k:
+// d ln a_k is unbounded as a_k falls to 1e-12, but probe k's share of U falls with a_k as
+// fast, so the term is large only where a probe that the Chebyshev test lets through (c_k
+// near 1) carries weight at the edge of its reach. (In a cell whose probes are all hidden, U
+// itself is tiny and so the bound is huge: the blend there is continuous but can swing between
+// probes within far less than a millimetre. The lines below stay where some probe of every
+// cell sees the point.)
+// The sum of all terms is the slope bound L(p) (per metre). For a maximum over the six axis
+// normals, |d max_a E_a| <= max_a |dE_a|, so the range is the largest over the axes. Each
+// step's jump must stay below 2 x step x L x range, with L and the range the larger of the
+// step's two ends (x 2: the first-order bound varies within the step; cells change at shared
+// faces, where the blend is continuous). And a jump that is no artefact of the step shrinks
+// with it: the largest jump at 0.25 mm steps is about 1/4 of that at 1 mm (a discontinuity of
+// size J would give J at every step size).
 
 struct SlopeBound {
-  float slope = 0.0f;  // L, per metre
-  float range = 0.0f;  // lux
+  float slope = 0.0f;       // L, per metre
+  float range = 0.0f;       // lux
+  float visibility = 0.0f;  // largest |v_k (recomputed here) - probeVisibility| (a self-check)
+  float ramp = 0.0f;        // the reach ramps' part of L
 };
 
 // L(p) and the probes' irradiance range for p in an inner cell (see above).
@@ -525,39 +620,65 @@ SlopeBound blendSlopeBound(const ProbeSet& set, vec3 p) {
   const vec3 gradB[4] = {-(rows[0] + rows[1] + rows[2]), rows[0], rows[1], rows[2]};
   const ProbeVisibility& vis = set.visibility;
   const ProbeBlendSettings blend;
-  float v[4], sum = 0.0f;
+  constexpr float kUnorm = 1.0f / 65535.0f;
+  constexpr size_t kValues = kVisibilityValuesPerTexel;
+  // The factors of v_k, from the map as probeVisibility reads it.
+  struct Factors {
+    float c = 1.0f, reach = 1.0f, v = 1.0f;
+    bool onRamp = false, floored = false;
+    float lnC = 0.0f, reachSlope = 0.0f;  // |d ln c| and |d reach| per metre
+  } f[4];
+  float sum = 0.0f;
   for (int k = 0; k < 4; ++k) {
     const size_t i = size_t(loc.probes[k]);
-    v[k] = probeVisibility(vis.probe(int32_t(i)), vis.resolution, vis.maxDistance[i],
-                           p - set.positions[i], blend);
-    sum += loc.barycentric[k] * v[k];
-  }
-  for (int k = 0; k < 4; ++k) {
-    const size_t i = size_t(loc.probes[k]);
-    for (int c = 0; c < 4; ++c)
-      if (size_t(cell[c]) == i) out.slope += v[k] / sum * glm::length(gradB[c]);
     const float dMax = vis.maxDistance[i];
     const vec3 offset = p - set.positions[i];
     const float r = glm::length(offset);
     const float d = std::clamp((r - blend.distanceBias) / dMax, 0.0f, 1.0f);
-    const OctahedralFootprint f = octahedralFootprint(octahedralEncode(offset / r), vis.resolution);
+    const OctahedralFootprint fp =
+        octahedralFootprint(octahedralEncode(offset / r), vis.resolution);
     const std::span<const uint16_t> m = vis.probe(int32_t(i));
-    float mu = 0.0f, m2 = 0.0f, muLo = 1.0f, muHi = 0.0f, m2Lo = 1.0f, m2Hi = 0.0f;
+    float mu = 0.0f, s2 = 0.0f, far = 0.0f;
+    float muLo = 1.0f, muHi = 0.0f, s2Lo = 1.0f, s2Hi = 0.0f, farLo = 1.0f, farHi = 0.0f;
     for (int t = 0; t < 4; ++t) {
-      const float a = float(m[2 * size_t(f.texel[t])]) / 65535.0f;
-      const float b = float(m[2 * size_t(f.texel[t]) + 1]) / 65535.0f;
-      mu += f.weight[t] * a;
-      m2 += f.weight[t] * b;
+      const uint16_t* texel = &m[kValues * size_t(fp.texel[t])];
+      const float a = float(texel[0]) * kUnorm, sigma = float(texel[1]) * kUnorm;
+      const float b = sigma * sigma, z = float(texel[2]) * kUnorm;
+      mu += fp.weight[t] * a, s2 += fp.weight[t] * b, far += fp.weight[t] * z;
       muLo = std::min(muLo, a), muHi = std::max(muHi, a);
-      m2Lo = std::min(m2Lo, b), m2Hi = std::max(m2Hi, b);
+      s2Lo = std::min(s2Lo, b), s2Hi = std::max(s2Hi, b);
+      farLo = std::min(farLo, z), farHi = std::max(farHi, z);
     }
-    if (d > mu && v[k] > kVisibilityFloor) {
-      const float minSigma = blend.minSigma / dMax;
-      const float s2 = std::max(m2 - mu * mu, minSigma * minSigma);
-      const float g = 1.145f * float(vis.resolution) / r;
-      out.slope += loc.weights[k] * 3.0f *
-                   ((1.0f / dMax + g * (muHi - muLo)) / std::sqrt(s2) +
-                    g * ((m2Hi - m2Lo) + 2.0f * mu * (muHi - muLo)) / s2);
+    const float w = blend.minSigma / dMax;
+    const float g = 1.145f * float(vis.resolution) / r;
+    s2 = std::max(s2, w * w);
+    const float ramp = 1.0f - (d - far) / w;
+    f[k].reach = std::clamp(ramp, 1e-12f, 1.0f);
+    f[k].onRamp = ramp > 1e-12f && ramp < 1.0f;
+    f[k].reachSlope = (1.0f + dMax * g * (farHi - farLo)) / blend.minSigma;
+    if (d > mu) {
+      const float e = d - mu;
+      const float chebyshev = s2 / (s2 + e * e);
+      f[k].c = chebyshev * chebyshev * chebyshev;
+      f[k].lnC =
+          3.0f * ((1.0f / dMax + g * (muHi - muLo)) / std::sqrt(s2) + g * (s2Hi - s2Lo) / s2);
+    }
+    f[k].v = std::max(f[k].c * f[k].reach, kVisibilityFloor);
+    f[k].floored = f[k].c * f[k].reach <= kVisibilityFloor;
+    const float runtime = probeVisibility(m, vis.resolution, dMax, offset, blend);
+    out.visibility = std::max(out.visibility, std::fabs(f[k].v - runtime));
+    sum += loc.barycentric[k] * f[k].v;
+  }
+  for (int k = 0; k < 4; ++k) {
+    const size_t i = size_t(loc.probes[k]);
+    for (int c = 0; c < 4; ++c)
+      if (size_t(cell[c]) == i) out.slope += f[k].v / sum * glm::length(gradB[c]);
+    if (f[k].floored) continue;
+    out.slope += loc.weights[k] * f[k].lnC;
+    if (f[k].onRamp) {
+      const float term = loc.barycentric[k] * f[k].c / sum * f[k].reachSlope;
+      out.slope += term;
+      out.ramp += term;
     }
   }
   for (int a = 0; a < 3; ++a)
@@ -579,6 +700,8 @@ struct LineSweep {
   float maxJump = 0.0f;     // largest |E(p + step) - E(p)|
   float worstShare = 0.0f;  // largest jump / (2 step L range)
   float maxSlope = 0.0f;    // largest L met
+  float ramp = 0.0f;        // largest part of L from reach ramps
+  float visibility = 0.0f;  // largest SlopeBound::visibility
   size_t outer = 0;         // samples outside the hull (the bound assumes inner cells)
   size_t overBound = 0;     // steps whose jump exceeds the bound
 };
@@ -589,6 +712,7 @@ LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
   const int n = int(length / step);
   float previous = 0.0f;
   SlopeBound previousBound;
+  bool havePrevious = false;
   int32_t hint = -1;
   for (int i = 0; i <= n; ++i) {
     const vec3 p = a + (b - a) * (float(i) * step / length);
@@ -597,10 +721,11 @@ LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
     const float e = maxAxisIrradiance(interpolateProbes(set, loc));
     if (loc.cell >= set.innerCellCount) {
       ++s.outer;
+      havePrevious = false;
       continue;
     }
     const SlopeBound bound = blendSlopeBound(set, p);
-    if (i > 0) {
+    if (havePrevious) {
       const float jump = std::fabs(e - previous);
       const float allowed = 2.0f * step * std::max(bound.slope, previousBound.slope) *
                             std::max(bound.range, previousBound.range);
@@ -610,16 +735,26 @@ LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
       s.overBound += jump > allowed + 1e-6f * (1.0f + bound.range) ? 1 : 0;
     }
     s.maxSlope = std::max(s.maxSlope, bound.slope);
+    s.ramp = std::max(s.ramp, bound.ramp);
+    s.visibility = std::max(s.visibility, bound.visibility);
     previous = e;
     previousBound = bound;
+    havePrevious = true;
   }
   return s;
 }
 
-// Three lines through cells with probes on both sides of the wall, all in valid space: two
-// parallel to the wall 0.2 m into room B (at the sun patch's height behind it, and 1.5 m up),
-// where room A's probes are hidden, and one from room B through the doorway into room A,
-// where they come into view.
+// Lines through cells with probes on both sides of the wall, all in valid space and inside
+// the grid's hull: two parallel to the wall 0.2 m into room B (at the sun patch's height
+// behind it, and 1.5 m up), where room A's probes are hidden; one from room B through the
+// doorway into room A, where they come into view; and two in room B near the doorway's
+// edges as room A's probes see them (0.3 m from the wall 0.2 m above the doorway's top, along
+// z past its side; and up its middle past the lintel). On the first of those, points pass out
+// of room-A probes' reach, and the reach ramps' part of L is most of it (measured over six
+// bakes: up to 16-44 per m, with L up to 28-57, on two_rooms; 51-135 of 88-177 on
+// two_rooms_thin).
+// Measured over six bakes: every jump within 0.23 of its bound; the 0.25 mm / 1 mm ratio of the
+// largest jumps 0.250-0.281 (above 1/4 where L varies within a millimetre, on the ramps).
 TEST(ProbeScenesWall, BlendIsContinuousWithABoundedSlopeAcrossTheWallsCells) {
   for (const WallScene& w : {kThickWall, kThinWall}) {
     const ProbeSet& set = bakedLayout(w, Layout::Grid);
@@ -627,11 +762,17 @@ TEST(ProbeScenesWall, BlendIsContinuousWithABoundedSlopeAcrossTheWallsCells) {
     struct Line {
       vec3 a, b;
       const char* name;
+      bool edge;  // crosses the doorway's edge as room A's probes see it
     };
     const Line lines[] = {
-        {vec3(w.faceB + 0.2f, 0.6f, 0.6f), vec3(w.faceB + 0.2f, 0.6f, 2.4f), "behind the patch"},
-        {vec3(w.faceB + 0.2f, 1.5f, 0.6f), vec3(w.faceB + 0.2f, 1.5f, 2.4f), "1.5 m up"},
-        {vec3(w.faceB + 0.6f, 1.0f, 3.3f), vec3(w.faceA - 0.6f, 1.0f, 3.3f), "doorway"}};
+        {vec3(w.faceB + 0.2f, 0.6f, 0.6f), vec3(w.faceB + 0.2f, 0.6f, 2.4f), "behind the patch",
+         false},
+        {vec3(w.faceB + 0.2f, 1.5f, 0.6f), vec3(w.faceB + 0.2f, 1.5f, 2.4f), "1.5 m up", false},
+        {vec3(w.faceB + 0.6f, 1.0f, 3.3f), vec3(w.faceA - 0.6f, 1.0f, 3.3f), "doorway", false},
+        {vec3(w.faceB + 0.3f, 2.3f, 2.0f), vec3(w.faceB + 0.3f, 2.3f, 3.45f), "over the doorway",
+         true},
+        {vec3(w.faceB + 0.2f, 0.55f, 3.3f), vec3(w.faceB + 0.2f, 2.45f, 3.3f), "up past the lintel",
+         false}};
     for (const Line& line : lines) {
       for (float t = 0.0f; t <= 1.0f; t += 0.05f)
         ASSERT_TRUE(isValidProbePoint(loaded(w).scene, *loaded(w).tracer,
@@ -640,18 +781,23 @@ TEST(ProbeScenesWall, BlendIsContinuousWithABoundedSlopeAcrossTheWallsCells) {
       const LineSweep mm = sweepLine(set, line.a, line.b, 1e-3f);
       const LineSweep quarter = sweepLine(set, line.a, line.b, 0.25e-3f);
       std::printf(
-          "%s, %s: largest jump %.3g lux per 1 mm, %.3g per 0.25 mm (ratio %.3f); "
-          "jump / bound at most %.3f; L up to %.1f per m\n",
+          "%s, %s: largest jump %.3g lux per 1 mm, %.3g per 0.25 mm (ratio %.3f); jump / bound "
+          "at most %.3f (0.25 mm: %.3f); L up to %.1f per m, reach ramps' part up to %.1f\n",
           w.file, line.name, mm.maxJump, quarter.maxJump, quarter.maxJump / mm.maxJump,
-          mm.worstShare, mm.maxSlope);
+          mm.worstShare, quarter.worstShare, mm.maxSlope, mm.ramp);
       EXPECT_EQ(mm.outer + quarter.outer, 0u) << w.file << ", " << line.name;
+      // The bound's own v is the runtime's (up to float rounding through the ramp's 1 / w).
+      EXPECT_LE(std::max(mm.visibility, quarter.visibility), 1e-3f) << w.file << ", " << line.name;
       EXPECT_EQ(mm.overBound, 0u) << w.file << ", " << line.name;
       EXPECT_EQ(quarter.overBound, 0u) << w.file << ", " << line.name;
       EXPECT_GT(mm.maxJump, 0.0f) << w.file << ", " << line.name;
-      EXPECT_LT(quarter.maxJump, 0.3f * mm.maxJump) << w.file << ", " << line.name;
+      EXPECT_LT(quarter.maxJump, 0.35f * mm.maxJump) << w.file << ", " << line.name;
       // The bound is no blanket: a jump of the probes' whole range would break it anywhere
-      // on the line (measured: 2 x 1 mm x L <= 0.27).
+      // on the line (measured: 2 x 1 mm x L <= 0.36).
       EXPECT_LT(2.0f * 1e-3f * mm.maxSlope, 1.0f) << w.file << ", " << line.name;
+      if (line.edge) {
+        EXPECT_GT(mm.ramp, 0.0f) << w.file << ", " << line.name << ": no reach ramp on the line";
+      }
     }
   }
 }

@@ -1,7 +1,7 @@
 /* runtime_c_api_test.c: the C API (kiln_runtime.h) compiled as C99 and linked against
  * kiln_runtime alone. It writes tiny .kprobe files byte by byte from the documented format
  * (two probes on a line: a dimension-1 set; version 1, and version 3 with per-probe
- * visibility), then loads and queries them, and checks that bad files and bad arguments come
+ * visibility maps of {mu, sigma, far} u16 per texel), then loads and queries them, and checks that bad files and bad arguments come
  * back as status codes with messages naming the field.
  * Usage: runtime_c_api_test <writable directory>. Returns 0 on success. */
 #include <math.h>
@@ -43,15 +43,18 @@ static uint64_t fnv1a(const unsigned char* p, size_t n, uint64_t h) {
 }
 
 /* What buildFile writes: version 1 (no occlusion, no visibility) or version 3 with the
- * occlusion block (nothing occluded) and, when resolution > 0, visibility maps: probe 0 sees
- * nothing (every texel at maxDistance), probe 1 has a wall kWall metres away in every
- * direction. resolution is written to the header as given; the maps are written only for a
- * resolution the buffer can hold, so an impossible one makes a file whose header is wrong. */
+ * occlusion block (nothing occluded) and, when resolution > 0, visibility maps of
+ * {mu, sigma, far} per texel: probe 0 sees nothing (every ray reached maxDistance: {1, 0, 1}),
+ * probe 1 sits inside a sphere kWall metres in radius (every ray stops there: mu = far =
+ * kWall / maxDistance, no spread). resolution is written to the header as given; the maps
+ * are written only when the buffer can hold them, so an impossible resolution makes a file
+ * whose header is wrong. */
 typedef struct FileSpec {
   uint32_t version;
   uint32_t resolution;
   float maxDistance[2];
-  int badMomentsTexel; /* >= 0: probe 1's texel with a mean square below its squared mean */
+  int spreadTexel; /* >= 0: probe 1's texel whose sigma is `spread` instead of 0 */
+  uint16_t spread;
 } FileSpec;
 
 static const float kWall = 0.3f;     /* metres from probe 1 to its wall */
@@ -62,7 +65,8 @@ static FileSpec plainSpec(void) {
   f.version = 1;
   f.resolution = 0;
   f.maxDistance[0] = f.maxDistance[1] = kDistance;
-  f.badMomentsTexel = -1;
+  f.spreadTexel = -1;
+  f.spread = 0;
   return f;
 }
 
@@ -80,8 +84,8 @@ static void putU16(uint16_t v) {
   buffer[used++] = (unsigned char)(v >> 8);
 }
 
-/* Probe 1's stored mean: kWall / maxDistance as unorm16. */
-static uint16_t wallMean(void) { return unorm16(kWall / kDistance); }
+/* Probe 1's stored mu and far: kWall / maxDistance as unorm16. */
+static uint16_t wallDepth(void) { return unorm16(kWall / kDistance); }
 
 /* Two probes at x = 0 and x = 2; probe 0 has L00 = (1, 2, 3), probe 1 has L00 = (3, 2, 1). */
 static size_t buildFile(const FileSpec* spec) {
@@ -116,20 +120,20 @@ static size_t buildFile(const FileSpec* spec) {
     for (i = 0; i < 4; ++i) putI32(-1);      /* occlusionLights: no channel used */
     for (i = 0; i < 8; ++i) putF32(1.0f);    /* occlusion[probe][4] */
   }
-  if (spec->version >= 3 && spec->resolution > 0 && spec->resolution <= 64) {
-    const uint16_t mean = wallMean();
-    const double m = mean / 65535.0;
-    texels = spec->resolution * spec->resolution;
+  texels = spec->resolution <= 64 ? spec->resolution * spec->resolution : 0;
+  if (spec->version >= 3 && texels > 0 && used + 8 + 2 * texels * 3 * 2 <= sizeof(buffer)) {
+    const uint16_t depth = wallDepth();
     putF32(spec->maxDistance[0]);
     putF32(spec->maxDistance[1]);
     for (t = 0; t < texels; ++t) { /* probe 0: open in every direction */
       putU16(65535);
+      putU16(0);
       putU16(65535);
     }
     for (t = 0; t < texels; ++t) { /* probe 1: a wall at kWall, no spread */
-      const int bad = (int)t == spec->badMomentsTexel;
-      putU16(bad ? 30000 : mean);
-      putU16(bad ? 0 : unorm16(m * m));
+      putU16(depth);
+      putU16((int)t == spec->spreadTexel ? spec->spread : 0);
+      putU16(depth);
     }
   }
   sum = fnv1a(buffer, 64, 14695981039346656037ULL);
@@ -160,17 +164,23 @@ static kiln_status loadSpec(const char* path, const FileSpec* spec, size_t cut) 
   return st;
 }
 
-/* Probe 1's visibility of a point `distance` metres from it, beyond its wall, with the default
- * blend (kiln/probe_visibility.h): d = (distance - distanceBias) / D against the stored mean
- * m, sigma at its floor minSigma / D (the stored moments have no spread beyond unorm16
- * rounding, 0.5 / 65535 < sigma^2), the Chebyshev bound cubed. */
-static double hiddenVisibility(double distance) {
-  const double sigma = 0.02 / kDistance;
-  const double d = (distance - 0.02) / kDistance;
-  const double excess = d - wallMean() / 65535.0;
-  const double c = sigma * sigma / (sigma * sigma + excess * excess);
-  return c * c * c;
+/* Probe 1's visibility of a point `distance` metres from it (kiln/probe_visibility.h), for a
+ * blend's distance bias and min_sigma: d = (distance - distance_bias) / D against its stored
+ * mu = far = m (no stored spread, so sigma is at its floor w = min_sigma / D); 1 up to m,
+ * then the Chebyshev bound cubed times the reach factor clamp(1 - (d - far) / w, 1e-12, 1). */
+static double wallVisibility(double distance, double distanceBias, double minSigma) {
+  const double w = minSigma / kDistance, m = wallDepth() / 65535.0;
+  const double d = (distance - distanceBias) / kDistance;
+  double c, reach = 1.0 - (d - m) / w;
+  if (reach > 1.0) reach = 1.0;
+  if (reach < 1e-12) reach = 1e-12;
+  if (d <= m) return reach;
+  c = w * w / (w * w + (d - m) * (d - m));
+  return c * c * c * reach;
 }
+
+/* With the default blend (distance_bias = min_sigma = 0.02). */
+static double hiddenVisibility(double distance) { return wallVisibility(distance, 0.02, 0.02); }
 
 /* The blend's weight of probe 1 at x, when probe 1's visibility there is v (probe 0 sees
  * everything): barycentric weights (2 - x) / 2 and x / 2, probe 1's scaled by v, renormalized. */
@@ -217,14 +227,16 @@ static void testVisibility(const char* path) {
   CHECK(kiln_probes_has_visibility(NULL) == 0 && kiln_probes_visibility_resolution(NULL) == 0);
 
   /* Behind probe 1's wall: the plain blend leaks probe 1 in with its barycentric 0.75; the
-   * visibility blend gives it the Chebyshev weight, ~5e-6. */
+   * visibility blend gives it its visibility's weight. 0.5 m from probe 1 is past far + w
+   * (0.3 + 0.02 + 0.02 m), so v = (1e-4 / (1e-4 + 0.09^2))^3 x 1e-12 = 1.8e-18 and the weight
+   * 0.75 v / 0.25 = 5.4e-18. (Probe 0, 1.5 m away with nothing within D, has v = 1.) */
   blend.visibility = 0;
   CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &plain) == KILN_OK);
   CHECK(within(plain.weights[0], 0.25, 1e-6) && within(plain.weights[1], 0.75, 1e-6));
   for (k = 0; k < 4; ++k) CHECK(plain.barycentric[k] == plain.weights[k]);
   CHECK(kiln_probes_locate_blend(probes, behind, -1, NULL, &loc) == KILN_OK);
   expected = blendedWeight1(1.5, hiddenVisibility(0.5));
-  CHECK(expected > 1e-6 && expected < 1e-5);
+  CHECK(expected > 5e-18 && expected < 6e-18);
   CHECK(within(loc.weights[1], expected, 1e-4 * expected));
   CHECK(within(loc.weights[0] + loc.weights[1], 1.0, 1e-6));
   CHECK(loc.cell == plain.cell);
@@ -235,6 +247,23 @@ static void testVisibility(const char* path) {
   /* kiln_probes_locate uses the default blend: the same answer. */
   CHECK(kiln_probes_locate(probes, behind, -1, &single[0]) == KILN_OK);
   CHECK(memcmp(&single[0], &loc, sizeof(loc)) == 0);
+
+  /* The blend's min_sigma and distance_bias reach the test. min_sigma 0.2 m (w = 0.1) puts
+   * the point inside the reach factor's ramp, (d - far) / w = 0.9, with sigma at 0.1:
+   * v = (0.01 / (0.01 + 0.09^2))^3 x 0.1 = 0.0169. (Float rounding of d and far, ~1e-7, over
+   * w stays below 1e-5 of v.) A distance bias of 0.25 m puts d at 0.125 < mu: seen, the
+   * barycentric blend. */
+  CHECK(kiln_probe_blend_defaults(&blend) == KILN_OK);
+  blend.min_sigma = 0.2f;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &loc) == KILN_OK);
+  expected = blendedWeight1(1.5, wallVisibility(0.5, 0.02, 0.2));
+  CHECK(expected > 0.045 && expected < 0.05);
+  CHECK(within(loc.weights[1], expected, 1e-4 * expected));
+  CHECK(within(loc.weights[0] + loc.weights[1], 1.0, 1e-6));
+  CHECK(kiln_probe_blend_defaults(&blend) == KILN_OK);
+  blend.distance_bias = 0.25f;
+  CHECK(kiln_probes_locate_blend(probes, behind, -1, &blend, &loc) == KILN_OK);
+  CHECK(within(loc.weights[0], 0.25, 1e-6) && within(loc.weights[1], 0.75, 1e-6));
 
   /* In front of the wall probe 1 sees the point: the barycentric blend (0.1, 0.9). A surface
    * normal facing probe 0 moves the tested point 0.3 m back, behind the wall. */
@@ -321,9 +350,19 @@ static void testVisibility(const char* path) {
   CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
   CHECK(strstr(kiln_last_error(), "visibilityResolution") != NULL);
   spec.resolution = 4;
-  spec.badMomentsTexel = 5;
+  /* A spread above half the distance range (sigma > 32768) is named; 32768 loads. */
+  spec.spreadTexel = 5;
+  spec.spread = 32769;
   CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
   CHECK(strstr(kiln_last_error(), "visibilityMoments[1][5]") != NULL);
+  spec.spread = 32768;
+  CHECK(loadSpec(path, &spec, 0) == KILN_OK);
+  spec.spreadTexel = -1;
+  /* A resolution the format allows but whose maps the file lacks: truncated. */
+  spec.resolution = 64;
+  CHECK(loadSpec(path, &spec, 0) == KILN_ERROR_INVALID_FILE);
+  CHECK(strstr(kiln_last_error(), "truncated") != NULL);
+  spec.resolution = 4;
   /* A version 1 file may not use the word that holds the resolution. */
   spec = plainSpec();
   spec.resolution = 4;

@@ -9,11 +9,13 @@
 //   - BruteForce: a scan of every tetrahedron (barycentric test), the baseline a lookup
 //     structure must beat, on fewer probes;
 //   - BlendHinted: the hinted path's lookup plus the SH blend (locateProbe + interpolateProbes),
-//     on the same random probes given synthetic 16 x 16 visibility maps, with visibility
-//     weighting (visibility:1) and without (visibility:0, the plain barycentric blend of the
-//     same set): the two rows of one probe count give the cost of leak-free blending as a
-//     ratio (the aim is at most 2x). bytes_per_probe is the .kprobe size (serializeProbeSet)
-//     over the probe count, with the visibility block (visibility:1) and without it (0).
+//     on the same random probes given synthetic visibility maps at the bake's default
+//     resolution (24 x 24 texels of {mu, sigma, far}), with visibility weighting
+//     (visibility:1) and without (visibility:0, the plain barycentric blend of the same set):
+//     the two rows of one probe count give the cost of leak-free blending as a ratio (the aim
+//     is at most 2x). bytes_per_probe is the .kprobe size (serializeProbeSet) over the probe
+//     count, with the visibility block (visibility:1) and without it (0); hidden_share is the
+//     share of the blend's probe tests that find the point (partly) hidden (v < 1).
 // Tetrahedralization: buildProbeTopology (Delaunay + outer cells + seed grid) with TetGen and
 // with CGAL for 1k, 10k and 100k random probes.
 // Each benchmark reports items_per_second (lookups, or probes tetrahedralized).
@@ -29,6 +31,7 @@
 #include <vector>
 
 #include "kiln/probe_runtime.h"
+#include "probes/probe_baker.h"
 #include "probes/tetrahedralize.h"
 #include "probes/visibility_bake.h"
 
@@ -164,32 +167,44 @@ void BM_LocateBruteForce(benchmark::State& state) {
 }
 
 // The random probe set of `fixture` (same positions, no CGAL) with a synthetic visibility map
-// per probe, and the file size per probe with and without the maps.
+// per probe, the file size per probe with and without the maps, and the share of the blend's
+// probe tests along the path that find the point (partly) hidden.
 struct VisibilityFixture {
   ProbeSet set;
   double bytesPerProbe = 0.0, plainBytesPerProbe = 0.0;
+  double hiddenShare = 0.0;
 };
 
-constexpr int32_t kBenchVisibilityResolution = 16;  // the bake's default
+constexpr int32_t kBenchVisibilityResolution = kDefaultVisibilityResolution;
 
-// Every texel a depth distribution with a mean uniform in [0.2, 1] of the probe's maxDistance
-// (per-probe D to the farthest corner of the probes' bounds, as a bake sets it) and a spread of
-// 5% of D. Random probes in
-// empty space would see nothing (mean 1: every test passes at once); these means put a
-// good share of the tests past the mean, into the Chebyshev branch a wall between probes
-// takes, so the timing is not the cheapest case.
+// Every texel {mu, sigma, far} as a bake of a cluttered scene would give it: a surface at a
+// depth uniform in [0.5, 1.5] probe spacings (spacing = side / cbrt(probes): about the
+// distance to the cell's other probes), a spread of 0.1 spacing and the farthest ray 3
+// spreads beyond the surface, each as a fraction of the probe's D (to the farthest corner of
+// the probes' bounds, as a bake sets it) and clamped to [0, 1]. Random probes in empty space
+// would see nothing (mu = far = 1: every test passes at once, the cheapest case); with these
+// maps about half of the tests fall beyond mu, into the Chebyshev branch a wall between probes
+// takes, and some beyond far, so both branches and the reach ramp are timed and the branch
+// is not predictable.
 void addSyntheticVisibility(ProbeSet& set, int32_t resolution, uint32_t seed) {
   ProbeVisibility& v = set.visibility;
   v.resolution = resolution;
   v.maxDistance = visibilityMaxDistances(set.positions, Bounds3{});
   v.moments.resize(size_t(set.probeCount()) * v.valuesPerProbe());
+  const float spacing = kSide / std::cbrt(float(set.probeCount()));
   std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> mean(0.2f, 1.0f);
-  constexpr float kSpread = 0.05f;
-  for (size_t t = 0; t + 1 < v.moments.size(); t += 2) {
-    const float m = mean(rng);
-    v.moments[t] = uint16_t(std::lround(m * 65535.0f));
-    v.moments[t + 1] = uint16_t(std::lround(kSpread * 65535.0f));
+  std::uniform_real_distribution<float> depth(0.5f * spacing, 1.5f * spacing);
+  const float sigma = 0.1f * spacing;
+  auto unorm = [](float x) { return uint16_t(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f)); };
+  for (int32_t i = 0; i < set.probeCount(); ++i) {
+    const float inverseD = 1.0f / v.maxDistance[size_t(i)];
+    uint16_t* texel = v.moments.data() + size_t(i) * v.valuesPerProbe();
+    for (size_t t = 0; t < v.valuesPerProbe(); t += kVisibilityValuesPerTexel) {
+      const float mu = depth(rng);
+      texel[t] = unorm(mu * inverseD);
+      texel[t + 1] = unorm(sigma * inverseD);
+      texel[t + 2] = unorm((mu + 3.0f * sigma) * inverseD);
+    }
   }
 }
 
@@ -198,11 +213,26 @@ const VisibilityFixture& visibilityFixture(int probes) {
   auto& slot = cache[probes];
   if (!slot) {
     slot = std::make_unique<VisibilityFixture>();
-    slot->set = buildProbeTopology(randomPoints(size_t(probes), 1)).value();
-    const double n = double(slot->set.probeCount());
-    slot->plainBytesPerProbe = double(serializeProbeSet(slot->set).size()) / n;
-    addSyntheticVisibility(slot->set, kBenchVisibilityResolution, 4);
-    slot->bytesPerProbe = double(serializeProbeSet(slot->set).size()) / n;
+    ProbeSet& set = slot->set;
+    set = buildProbeTopology(randomPoints(size_t(probes), 1)).value();
+    const double n = double(set.probeCount());
+    slot->plainBytesPerProbe = double(serializeProbeSet(set).size()) / n;
+    addSyntheticVisibility(set, kBenchVisibilityResolution, 4);
+    slot->bytesPerProbe = double(serializeProbeSet(set).size()) / n;
+    size_t tests = 0, hidden = 0;
+    int32_t hint = -1;
+    for (const glm::vec3& p : pathPoints()) {
+      const ProbeLocation loc = locateProbe(set, p, hint);
+      hint = loc.cell;
+      for (int k = 0; k < 4; ++k) {
+        if (loc.probes[k] < 0 || !(loc.barycentric[k] > 0.0f)) continue;
+        const size_t i = size_t(loc.probes[k]);
+        ++tests;
+        hidden += probeVisibility(set.visibility.probe(int32_t(i)), set.visibility.resolution,
+                                  set.visibility.maxDistance[i], p - set.positions[i], {}) < 1.0f;
+      }
+    }
+    slot->hiddenShare = tests > 0 ? double(hidden) / double(tests) : 0.0;
   }
   return *slot;
 }
@@ -223,6 +253,7 @@ void BM_BlendHinted(benchmark::State& state) {
   }
   state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
   state.counters["bytes_per_probe"] = blend.visibility ? f.bytesPerProbe : f.plainBytesPerProbe;
+  state.counters["hidden_share"] = blend.visibility ? f.hiddenShare : 0.0;
 }
 
 void BM_Tetrahedralize(benchmark::State& state) {

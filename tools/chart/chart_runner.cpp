@@ -61,7 +61,9 @@ Result<ChartRunReport> runCharts(const ChartOptions& options, const std::string&
     if (Status s = writeChartCsv(outDir, *table); !s) return Error{s.error()};
     report.written.push_back(outDir + "/" + table->name + ".csv");
     if (!report.gnuplotMissing) {
-      if (Status s = renderChartPng(report.gnuplot, outDir, *table); !s) return Error{s.error()};
+      if (Status s = renderChartPng(report.gnuplot, outDir, *table, table->width, table->height);
+          !s)
+        return Error{s.error()};
       report.written.push_back(outDir + "/" + table->name + ".png");
     }
   }

@@ -20,6 +20,7 @@ struct ChartTable {
   // gnuplot commands after the common preamble (terminal, output, CSV separator and column
   // headers); "@CSV@" stands for the quoted CSV path.
   std::string plot;
+  int width = 800, height = 500;  // the PNG's size in pixels
   // Non-empty: the chart could not be measured here (e.g. ../shared is absent); nothing is
   // written and this says why.
   std::string skipped;

@@ -67,9 +67,11 @@ struct BakeOptions {
   bool quiet = false;
 };
 
-// Bytes the visibility block adds per probe: its maxDistance (f32) and R^2 x 2 unorm16 moments.
+// Bytes the visibility block adds per probe: its maxDistance (f32) and R^2 texels of
+// {mu, sigma, far} as unorm16.
 size_t visibilityBytesPerProbe(int32_t resolution) {
-  return resolution > 0 ? sizeof(float) + 2 * sizeof(uint16_t) * size_t(resolution) * resolution
+  return resolution > 0 ? sizeof(float) + kVisibilityValuesPerTexel * sizeof(uint16_t) *
+                                              size_t(resolution) * size_t(resolution)
                         : 0;
 }
 
@@ -169,10 +171,12 @@ int runBake(const BakeOptions& o) {
       float lo = kInfinity, hi = 0.0f;
       for (float d : vis.maxDistance) lo = std::min(lo, d), hi = std::max(hi, d);
       std::cerr << "kiln: visibility " << vis.resolution << " x " << vis.resolution
-                << " depth moments per probe, " << visibilityBytesPerProbe(vis.resolution)
-                << " bytes per probe, max distance " << lo << " to " << hi << " m"
-                << (o.visibilityMaxDistance > 0.0f ? " (--visibility-max-distance)"
-                                                   : " (longest edge of each probe's cells)")
+                << " depth map per probe ({mu, sigma, far} per texel), "
+                << visibilityBytesPerProbe(vis.resolution) << " bytes per probe, max distance "
+                << lo << " to " << hi << " m"
+                << (o.visibilityMaxDistance > 0.0f
+                        ? " (--visibility-max-distance)"
+                        : " (to the farthest corner of the scene and probes)")
                 << "\n";
     }
   }
@@ -304,10 +308,12 @@ Json exportJson(const ProbeSet& s, bool withMoments) {
   j["visibilityResolution"] = vis.resolution;
   j["visibilityConvention"] =
       "per probe, an octahedral map (visibilityResolution^2 texels, +z at the centre, texel "
-      "(i, j) at index j * R + i) of the mean and mean square of the first-hit distance of the "
-      "probe's bake rays, clamped to visibilityMaxDistance D (metres) and divided by D (resp. "
-      "D^2); visibilityMoments (with --visibility-moments) lists them per texel as [mean, mean "
-      "square] in those units; resolution 0 = no visibility (plain blending)";
+      "(i, j) at index j * R + i) of the first-hit distances s = min(t, D) / D of the probe's "
+      "bake rays (a miss counts as D = visibilityMaxDistance, metres), fitted per texel by a "
+      "plane in the map's coordinates; visibilityMoments (with --visibility-moments) lists per "
+      "texel [mu, sigma, far]: the plane at the texel centre, the RMS residual of the fit and "
+      "the largest s of the texel's rays, all as fractions of D; resolution 0 = no visibility "
+      "(plain blending)";
   Json maxDistance = Json::array();
   for (float d : vis.maxDistance) maxDistance.push_back(shortest(d));
   j["visibilityMaxDistance"] = std::move(maxDistance);
@@ -316,8 +322,13 @@ Json exportJson(const ProbeSet& s, bool withMoments) {
     for (int32_t i = 0; i < s.probeCount(); ++i) {
       const std::span<const uint16_t> m = vis.probe(i);
       Json texels = Json::array();
-      for (size_t t = 0; t + 1 < m.size(); t += 2)
-        texels.push_back({shortest(float(m[t]) / 65535.0f), shortest(float(m[t + 1]) / 65535.0f)});
+      for (size_t t = 0; t + kVisibilityValuesPerTexel <= m.size();
+           t += kVisibilityValuesPerTexel) {
+        Json texel = Json::array();
+        for (size_t k = 0; k < kVisibilityValuesPerTexel; ++k)
+          texel.push_back(shortest(float(m[t + k]) / 65535.0f));
+        texels.push_back(std::move(texel));
+      }
       moments.push_back(std::move(texels));
     }
     j["visibilityMoments"] = std::move(moments);
@@ -412,8 +423,8 @@ void registerProbesCommand(CLI::App& app) {
               std::to_string(kMaxVisibilityResolution)))
       ->capture_default_str();
   b->add_option("--visibility-max-distance", bake->visibilityMaxDistance,
-                "Metres the visibility depths are clamped to (0 = per probe, the longest edge "
-                "of its cells)")
+                "Metres the visibility depths are clamped to (0 = per probe, the distance to "
+                "the farthest corner of the scene and the probes)")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
             // Range() lets NaN through (every comparison with it is false).
@@ -451,8 +462,8 @@ void registerProbesCommand(CLI::App& app) {
   e->add_flag("--json", exp->json, "JSON output (the only format; accepted for clarity)");
   e->add_option("--out,-o", exp->out, "Write to this file instead of stdout");
   e->add_flag("--visibility-moments", exp->moments,
-              "Also list every probe's visibility map (visibilityMoments; large: R^2 texels "
-              "per probe)");
+              "Also list every probe's visibility map (visibilityMoments: per probe R^2 "
+              "texels of [mu, sigma, far]; large)");
   e->callback(commandCallback([exp]() { return runExport(*exp); }));
 
   registerProbesLppvCommand(*probes);

@@ -109,15 +109,17 @@ float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDis
   // as it is: normalizing it first would put a division on the lookup's critical path for a
   // change in the last bit.
   const OctahedralFootprint f = footprint(octahedralEncode(offset), r);
-  // Depth and variance are interpolated separately: a tilted wall's depth changes by a lot
+  // Depth, spread and far are interpolated separately: a tilted wall's depth changes by a lot
   // between neighbouring texels, and the spread of those texel values (what interpolating the
   // second moment would add) is no uncertainty about where the wall is along this direction.
-  float mean = 0.0f, variance = 0.0f, far = 0.0f;
+  // The spread is interpolated as sigma, not sigma^2, so that a texel at a silhouette (wall
+  // and window in one texel: a large sigma) does not widen its neighbours' test by its
+  // weight x sigma^2 where its weight is small.
+  float mean = 0.0f, sigma = 0.0f, far = 0.0f;
   for (int k = 0; k < 4; ++k) {
     const uint16_t* texel = &moments[3 * size_t(f.texel[k])];
-    const float sigma = float(texel[1]);
     mean += f.weight[k] * float(texel[0]);
-    variance += f.weight[k] * (sigma * sigma);
+    sigma += f.weight[k] * float(texel[1]);
     far += f.weight[k] * float(texel[2]);
   }
   mean *= kUnorm16;
@@ -128,7 +130,8 @@ float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDis
   // cut is a ramp minSigma wide, so v stays continuous in d.
   const float reach = std::clamp(1.0f - (d - far) / minSigma, kHiddenReach, 1.0f);
   if (d <= mean) return std::max(reach, kVisibilityFloor);
-  variance = std::max(variance * (kUnorm16 * kUnorm16), minSigma * minSigma);
+  sigma = std::max(sigma * kUnorm16, minSigma);
+  const float variance = sigma * sigma;
   const float excess = d - mean;
   const float chebyshev = variance / (variance + excess * excess);
   return std::max(chebyshev * chebyshev * chebyshev * reach, kVisibilityFloor);

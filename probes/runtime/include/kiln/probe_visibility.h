@@ -65,6 +65,12 @@ struct ProbeBlendSettings {
   // Smallest standard deviation of the depth distribution (metres): flat, noise-free texels
   // would otherwise make the test a hard step in d.
   float minSigma = 0.02f;
+  // The weights b_k v_k are divided by max(sum_j b_j v_j, minVisibleWeight): a point that the
+  // probes of its cell see with at least this share of the barycentric weight gets weights
+  // summing to 1; below it the blend fades out (towards black, at a point no probe sees)
+  // instead of handing the whole weight to whichever hidden probe is least hidden, which may
+  // be on the far side of a wall. 0 = always renormalize fully.
+  float minVisibleWeight = 0.01f;
 };
 
 // Octahedral map of unit directions (x, y, z in world axes) to [-1, 1]^2 with +z at the
