@@ -79,8 +79,8 @@ struct ProbeBakeSettings {
   // 32 x 32 (6 KB per probe): smaller texels leak at silhouettes (docs/probes.md, "Why these
   // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
-  // Distance (metres) the moments are clamped to; 0 = per probe, the longest edge of its
-  // cells (visibilityMaxDistances).
+  // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
+  // corner of the scene's bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
   int threads = 0;  // 0 = all cores
 };
@@ -130,7 +130,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
 struct ProbeSample {
   ShL2Rgb sh;
   float validity = 1.0f;
-  std::vector<uint16_t> visibility;  // resolution^2 x 2 unorm16 moments, or empty
+  std::vector<uint16_t> visibility;  // resolution^2 x {mu, sigma, far} unorm16, or empty
 };
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr,

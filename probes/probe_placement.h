@@ -140,7 +140,7 @@ struct ProbePlacementSettings {
   std::vector<uint32_t> snapshotCounts;
   uint64_t seed = 0;
   // Integrator settings of the cheap bakes (rays are candidateRays). bake.visibilityResolution
-  // (default 16, as bakeProbes) > 0: every candidate and spawned probe also records a
+  // (default kDefaultVisibilityResolution, as bakeProbes) > 0: every candidate and spawned probe also records a
   // visibility map, and sets are scored with the visibility-weighted blend; 0: plain blend.
   // The maps' maxDistance is bake.visibilityMaxDistance when > 0, else per point, as
   // bakeProbes sets it (visibilityMaxDistances over the scene's bounds).
@@ -222,7 +222,8 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
                                  ProbeVisibility* visibility = nullptr);
 
 // The visibility maps of a tetrahedron's four probes (kiln/probe_visibility.h): each probe's
-// moments (resolution^2 x 2 unorm16) and maxDistance. resolution 0 = no maps.
+// moments (resolution^2 x kVisibilityValuesPerTexel unorm16) and maxDistance. resolution 0 =
+// no maps.
 struct CellProbeMaps {
   int32_t resolution = 0;
   std::array<std::span<const uint16_t>, 4> moments{};

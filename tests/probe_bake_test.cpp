@@ -455,7 +455,7 @@ TEST(ProbesCli, BakesTheScenesProbeGroups) {
 }
 
 // Visibility through the CLI on two_rooms with its 36 scene probes (3 x 2 x 3 per room): the
-// bake writes a version 3 file with 24 x 24 maps by default and none with
+// bake writes a version 3 file with 32 x 32 maps by default and none with
 // --visibility-resolution 0. At (4.45, 0.3, 1.5), 0.2 m into the dark room B from the shared
 // wall whose other side room A's sun lights, the point's cell is an outer cell reaching into
 // room A: the plain blend gives it about 1.7 lux of room A's light, the visibility blend
@@ -469,16 +469,16 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
   // Each probe's map: its D (f32) and R^2 texels of {mu, sigma, far} (unorm16).
   const int32_t r = kDefaultVisibilityResolution;
   const size_t bytesPerProbe = 4 + size_t(r) * size_t(r) * kVisibilityValuesPerTexel * 2;
-  ASSERT_EQ(r, 24);
-  ASSERT_EQ(bytesPerProbe, 3460u);
+  ASSERT_EQ(r, 32);
+  ASSERT_EQ(bytesPerProbe, 6148u);
   std::string log;
   ASSERT_EQ(
       test::runCommand(
           kiln() + "probes bake " + scene + " --out " + withVis + " --rays 4096 --threads 2", &log),
       0)
       << log;
-  EXPECT_NE(log.find("visibility 24 x 24 depth map per probe ({mu, sigma, far} per texel), "
-                     "3460 bytes per probe"),
+  EXPECT_NE(log.find("visibility 32 x 32 depth map per probe ({mu, sigma, far} per texel), "
+                     "6148 bytes per probe"),
             std::string::npos)
       << log;
   ASSERT_EQ(test::runCommand(kiln() + "probes bake " + scene + " --out " + without +
@@ -500,7 +500,7 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
   EXPECT_EQ(u32(bytesVis, 4), 3u);
   EXPECT_EQ(u32(bytesVis, 60), uint32_t(r));
   EXPECT_EQ(u32(bytesPlain, 60), 0u);
-  // The maps are the only difference in size: 36 x (4 + 24^2 x 3 x 2) bytes.
+  // The maps are the only difference in size: 36 x (4 + 32^2 x 3 x 2) bytes.
   EXPECT_EQ(bytesVis.size() - bytesPlain.size(), 36u * bytesPerProbe);
 
   Result<Scene> loaded = loadScene(scene);

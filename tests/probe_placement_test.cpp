@@ -301,7 +301,7 @@ TEST(ProbePlacement, LeakEstimateScoresTheVisibilityWeightedBlend) {
   const float weighted = cellLeakVolumeError(*t.tracer, span, sh, floor, maps);
   EXPECT_GT(plain, 0.0f);
   // Measured 0.26 plain and 0.0004-0.0007 with maps over four bake seeds (what remains is
-  // the 16 x 16 maps' blur at points next to the wall): a margin of about 4x.
+  // the maps' blur at points next to the wall): a margin of about 4x.
   EXPECT_LT(weighted, 0.01f * plain) << "plain " << plain << ", with maps " << weighted;
   // Without visibility (resolution 0) bakePointSh leaves the maps empty.
   b.visibilityResolution = 0;

@@ -563,22 +563,22 @@ TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
 // the blend of the probes' irradiances E_k (one normal) is E = sum_k w_k E_k, so
 //   dE = sum_k du_k (E_k - E) / U,   |dE| <= (max_k E_k - min_k E_k) sum_k |du_k| / U.
 // Visibility (kiln/probe_visibility.h): v_k = max(c_k a_k, floor), with c_k = 1 for d <= mu and
-// C^3 beyond, C = s2 / (s2 + e^2), e = d - mu, s2 = max(sigma^2, (minSigma / D)^2), and the
-// reach a_k = clamp(1 - (d - far) / w, 1e-12, 1), w = minSigma / D; mu, sigma^2 and far are
+// C^3 beyond, C = s2 / (s2 + e^2), e = d - mu, s = max(sigma, minSigma / D), s2 = s^2, and the
+// reach a_k = clamp(1 - (d - far) / w, 1e-12, 1), w = minSigma / D; mu, sigma and far are
 // each bilinear in the map. Where v_k is floored it is flat; elsewhere dv_k = a_k dc_k + c_k da_k
 // and
 //   |du_k| / U <= (v_k / U) |grad b_k| |dp| + w_k |d ln c_k| + (b_k c_k / U) |da_k|.
 // Barycentric: |grad b_k| is 1 / the cell's height over the face opposite probe k.
 // Chebyshev: |d ln C| = |ds2 e^2 / (s2 (s2 + e^2)) - 2 e de / (s2 + e^2)| <= |ds2| / s2 + |de| / s
-// (2 e / (s2 + e^2) is largest, 1 / s, at e = s), and ln c = 3 ln C. d changes by at most
-// |dp| / D. A bilinear value's gradient in texel units is at most sqrt(2) x the range of the
-// footprint's four texels (Dmu, Dsigma2, Dfar; while s2 sits on its minimum it is flat, so
-// Dsigma2 over-counts there); texel coordinates move at most R / 2 x 1.618 per radian of
+// (2 e / (s2 + e^2) is largest, 1 / s, at e = s), |ds2| / s2 = 2 |ds| / s, and ln c = 3 ln C.
+// d changes by at most |dp| / D. A bilinear value's gradient in texel units is at most
+// sqrt(2) x the range of the footprint's four texels (Dmu, Dsigma, Dfar; while s sits on its
+// minimum it is flat, so Dsigma over-counts there); texel coordinates move at most R / 2 x 1.618 per radian of
 // direction (the octahedral map's largest stretch, (1 + sqrt 5) / 2, the largest singular
 // value of its Jacobian, reached on the equator at the x and y axes; the wrapped seams are
 // continuous), and the direction from the probe at most |dp| / r radians (r: distance to the
 // probe). With G = sqrt(2) x 1.618 x R / (2 r) = 1.145 R / r:
-//   |d ln c_k| <= 3 [(1 / D + G Dmu) / s + G Dsigma2 / s2] |dp|   (0 for d <= mu).
+//   |d ln c_k| <= 3 [(1 / D + G Dmu) / s + 2 G Dsigma / s] |dp|   (0 for d <= mu).
 // Reach: flat at both clamps, and on the ramp between them |da_k| <= (|dd| + |dfar|) / w <=
 // (1 + D G Dfar) |dp| / minSigma. That ramp is steep, and the bound carries its slope 1 / w in
 // full: 1 / minSigma is 50 per metre from the distance alone, and where far jumps between
@@ -638,20 +638,21 @@ SlopeBound blendSlopeBound(const ProbeSet& set, vec3 p) {
     const OctahedralFootprint fp =
         octahedralFootprint(octahedralEncode(offset / r), vis.resolution);
     const std::span<const uint16_t> m = vis.probe(int32_t(i));
-    float mu = 0.0f, s2 = 0.0f, far = 0.0f;
-    float muLo = 1.0f, muHi = 0.0f, s2Lo = 1.0f, s2Hi = 0.0f, farLo = 1.0f, farHi = 0.0f;
+    float mu = 0.0f, sigma = 0.0f, far = 0.0f;
+    float muLo = 1.0f, muHi = 0.0f, sLo = 1.0f, sHi = 0.0f, farLo = 1.0f, farHi = 0.0f;
     for (int t = 0; t < 4; ++t) {
       const uint16_t* texel = &m[kValues * size_t(fp.texel[t])];
-      const float a = float(texel[0]) * kUnorm, sigma = float(texel[1]) * kUnorm;
-      const float b = sigma * sigma, z = float(texel[2]) * kUnorm;
-      mu += fp.weight[t] * a, s2 += fp.weight[t] * b, far += fp.weight[t] * z;
+      const float a = float(texel[0]) * kUnorm, b = float(texel[1]) * kUnorm;
+      const float z = float(texel[2]) * kUnorm;
+      mu += fp.weight[t] * a, sigma += fp.weight[t] * b, far += fp.weight[t] * z;
       muLo = std::min(muLo, a), muHi = std::max(muHi, a);
-      s2Lo = std::min(s2Lo, b), s2Hi = std::max(s2Hi, b);
+      sLo = std::min(sLo, b), sHi = std::max(sHi, b);
       farLo = std::min(farLo, z), farHi = std::max(farHi, z);
     }
     const float w = blend.minSigma / dMax;
     const float g = 1.145f * float(vis.resolution) / r;
-    s2 = std::max(s2, w * w);
+    const float sd = std::max(sigma, w);
+    const float s2 = sd * sd;
     const float ramp = 1.0f - (d - far) / w;
     f[k].reach = std::clamp(ramp, 1e-12f, 1.0f);
     f[k].onRamp = ramp > 1e-12f && ramp < 1.0f;
@@ -661,7 +662,7 @@ SlopeBound blendSlopeBound(const ProbeSet& set, vec3 p) {
       const float chebyshev = s2 / (s2 + e * e);
       f[k].c = chebyshev * chebyshev * chebyshev;
       f[k].lnC =
-          3.0f * ((1.0f / dMax + g * (muHi - muLo)) / std::sqrt(s2) + g * (s2Hi - s2Lo) / s2);
+          3.0f * ((1.0f / dMax + g * (muHi - muLo)) / sd + 2.0f * g * (sHi - sLo) / sd);
     }
     f[k].v = std::max(f[k].c * f[k].reach, kVisibilityFloor);
     f[k].floored = f[k].c * f[k].reach <= kVisibilityFloor;

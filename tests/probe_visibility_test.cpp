@@ -62,22 +62,21 @@ std::vector<uint16_t> openMap(int32_t r) { return uniformMap(r, {65535, 0, 65535
 constexpr double kHiddenReach = 1e-12;
 
 // The visibility probeVisibility must give, for a point `length` metres from the probe, when
-// the interpolated map values are mu, sigma^2 and far (fractions of D): the file comment's
-// formula in double.
-double expectedVisibility(double mu, double variance, double far, double D, double length,
+// the interpolated map values are mu, sigma and far (fractions of D): docs/probes.md's formula
+// ("What the runtime does") in double.
+double expectedVisibility(double mu, double sigma, double far, double D, double length,
                           const ProbeBlendSettings& s) {
   if (!(length > 0.0)) return 1.0;
   const double d = std::clamp((length - s.distanceBias) / D, 0.0, 1.0);
   const double w = s.minSigma / D;
   const double reach = std::clamp(1.0 - (d - far) / w, kHiddenReach, 1.0);
   if (d <= mu) return std::max(reach, double(kVisibilityFloor));
-  variance = std::max(variance, w * w);
+  const double variance = std::max(sigma, w) * std::max(sigma, w);
   const double c = variance / (variance + (d - mu) * (d - mu));
   return std::max(c * c * c * reach, double(kVisibilityFloor));
 }
 double expectedVisibility(Texel t, double D, double length, const ProbeBlendSettings& s) {
-  const double sigma = t.sigma / 65535.0;
-  return expectedVisibility(t.mu / 65535.0, sigma * sigma, t.far / 65535.0, D, length, s);
+  return expectedVisibility(t.mu / 65535.0, t.sigma / 65535.0, t.far / 65535.0, D, length, s);
 }
 
 glm::vec2 texelCentre(int32_t i, int32_t j, int32_t r) {
@@ -272,13 +271,15 @@ TEST(ProbeVisibility, StoredVarianceAboveTheFloorIsUsed) {
   EXPECT_NEAR(probeVisibility(map, r, d, glm::vec3(0.0f, 0.6f, 0.0f), s), 0.0131, 2e-4);
 }
 
-// Between two texels the lookup interpolates mu, sigma^2 and far each on its own. A map whose
-// columns 3 and 4 hold A = {0.3, 0.05, 0.5} and B = {0.5, 0.15, 0.7} (every other column
-// something else entirely), sampled on the line between their centres (the bilinear weights
-// are 1/2 each), behaves as {0.4, (0.05^2 + 0.15^2) / 2 = 0.0125, 0.6}; at a texel's centre it
-// is that texel's. Interpolating sigma instead (0.1^2 = 0.01) or taking the larger far would
-// give clearly different values (checked below, so the test does tell them apart).
-TEST(ProbeVisibility, InterpolatesMuSigmaSquaredAndFarSeparately) {
+// Between two texels the lookup interpolates mu, sigma and far each on its own (sigma as
+// sigma, so that a silhouette texel's large sigma does not widen its neighbours' test by its
+// weight x sigma^2). A map whose columns 3 and 4 hold A = {0.3, 0.05, 0.5} and B = {0.5, 0.15,
+// 0.7} (every other column something else entirely), sampled on the line between their
+// centres (the bilinear weights are 1/2 each), behaves as {0.4, 0.1, 0.6}; at a texel's centre
+// it is that texel's. Interpolating sigma^2 instead ((0.05^2 + 0.15^2) / 2 = 0.0125 against
+// 0.1^2 = 0.01) or taking the larger far would give clearly different values (checked below,
+// so the test does tell them apart).
+TEST(ProbeVisibility, InterpolatesMuSigmaAndFarSeparately) {
   const int32_t r = 8, j = 2;
   const float d = 1.0f;
   const ProbeBlendSettings s;
@@ -296,23 +297,23 @@ TEST(ProbeVisibility, InterpolatesMuSigmaSquaredAndFarSeparately) {
   }
   auto value = [](uint16_t x) { return x / 65535.0; };
   const double mu = (value(a.mu) + value(b.mu)) / 2.0, far = (value(a.far) + value(b.far)) / 2.0;
-  const double variance =
-      (value(a.sigma) * value(a.sigma) + value(b.sigma) * value(b.sigma)) / 2.0;
-  const double meanSigma = (value(a.sigma) + value(b.sigma)) / 2.0;
+  const double sigma = (value(a.sigma) + value(b.sigma)) / 2.0;
+  const double rmsSigma =
+      std::sqrt((value(a.sigma) * value(a.sigma) + value(b.sigma) * value(b.sigma)) / 2.0);
   // The midpoint of the centres of texels (3, j) and (4, j) is u = 0.
   const glm::vec3 between = octahedralDecode(glm::vec2(0.0f, texelCentre(3, j, r).y));
   const glm::vec3 centreA = octahedralDecode(texelCentre(3, j, r));
   for (double x : {0.35, 0.45, 0.5, 0.55, 0.59, 0.605, 0.61, 0.615, 0.65, 0.8}) {
     const double length = x * d + s.distanceBias;
-    const double expected = expectedVisibility(mu, variance, far, d, length, s);
+    const double expected = expectedVisibility(mu, sigma, far, d, length, s);
     // Float rounding of d and far (~1e-7 each) is divided by the ramp's width minSigma / D
     // = 0.02 there: up to ~1e-5 in the reach factor.
     EXPECT_NEAR(probeVisibility(map, r, d, between * float(length), s), expected,
                 1e-4 * expected + 1e-5)
         << x;
     const double other = std::max(
-        std::fabs(expectedVisibility(mu, meanSigma * meanSigma, far, d, length, s) - expected),
-        std::fabs(expectedVisibility(mu, variance, value(b.far), d, length, s) - expected));
+        std::fabs(expectedVisibility(mu, rmsSigma, far, d, length, s) - expected),
+        std::fabs(expectedVisibility(mu, sigma, value(b.far), d, length, s) - expected));
     // (Beyond 0.72 both far values cut the point off and both variances give ~1e-14.)
     if (x > 0.45 && x < 0.7) {
       EXPECT_GT(other, 100.0 * (1e-4 * expected + 1e-5)) << x;
@@ -451,8 +452,9 @@ ProbeBlendSettings plainBlend() {
 // With visibility the weights are the barycentric ones times each probe's visibility,
 // renormalized: here the corners see everything (v = 1) and probe 8 has the visibility of its
 // wall (1 in front, the cubed Chebyshev value times the reach factor behind), so weight k =
-// b_k v_k / sum_j b_j v_j in closed form. Without visibility (the setting, or a set that has
-// none) the weights are exactly the barycentric ones.
+// b_k v_k / max(sum_j b_j v_j, minVisibleWeight) in closed form (the corners see every point,
+// so the sum is at least 1 - b8 and the weights sum to 1). Without visibility (the setting,
+// or a set that has none) the weights are exactly the barycentric ones.
 TEST(ProbeBlend, WeightsAreBarycentricTimesVisibilityRenormalized) {
   const ProbeSet s = hiddenCentreSet();
   ProbeSet none = s;
@@ -478,7 +480,8 @@ TEST(ProbeBlend, WeightsAreBarycentricTimesVisibilityRenormalized) {
     // open map for a point more than D from it: d is clamped to 1 = far, and the
     // interpolated far can be 1 - 1e-7. The weights are monotone in the v (b_k v_k / sum
     // rises with v_k and falls with the others), so they lie between the closed forms at the
-    // v's -+ that error, to float rounding of the blend (a few 1e-7, relative).
+    // v's -+ that error, to float rounding of the blend (a few 1e-7, relative). (Dividing by
+    // max(sum, minVisibleWeight) keeps both monotonicities.)
     double v[4], error[4], b8 = 0.0, distance8 = 0.0;
     for (int k = 0; k < 4; ++k) {
       v[k] = 1.0;
@@ -498,15 +501,17 @@ TEST(ProbeBlend, WeightsAreBarycentricTimesVisibilityRenormalized) {
         b8 += loc.barycentric[k];
       }
     }
-    // b_k v_k / sum with v_k moved by `own` errors and every other v by `others`.
+    // b_k v_k / max(sum, minVisibleWeight) with v_k moved by `own` errors and every other v by
+    // `others`.
     auto closedForm = [&](int k, double own, double others) {
       double sum = 0.0, mine = 0.0;
       for (int j = 0; j < 4; ++j) {
-        const double bv = loc.barycentric[j] * std::max(v[j] + (j == k ? own : others) * error[j], 0.0);
+        const double moved = std::max(v[j] + (j == k ? own : others) * error[j], 0.0);
+        const double bv = loc.barycentric[j] * moved;
         sum += bv;
         if (j == k) mine = bv;
       }
-      return mine / sum;
+      return mine / std::max(sum, double(blend.minVisibleWeight));
     };
     double weightSum = 0.0;
     for (int k = 0; k < 4; ++k) {
@@ -557,20 +562,28 @@ double nearestProbeOfCell(const ProbeSet& s, const ProbeLocation& loc, glm::vec3
   return nearest;
 }
 
-// When no probe of the cell sees the point the blend is still weighted by relative visibility:
-// every v is (1e-4 / (1e-4 + (d - 0.05)^2))^3 x 1e-12 (beyond far + w), 5e-20 at most here
-// (d >= 0.215) but far above the floor (1e-30), and the ratios of those values decide the
-// weights: b_k v_k / sum_j b_j v_j in closed form (1e-4 relative, as for one probe: the common
-// 1e-12 cancels). The nearest probe of the cell has the largest v, so it gets at least its
-// barycentric weight and the farthest at most its; and the blend is clearly not the
-// barycentric one.
-TEST(ProbeBlend, AllHiddenIsWeightedByRelativeVisibility) {
+// When no probe of the cell sees the point every v is (1e-4 / (1e-4 + (d - 0.05)^2))^3 x 1e-12
+// (beyond far + w), 4.9e-20 at most here (d >= 0.215) but far above the floor (1e-30), and
+// the visible weight sum_j b_j v_j is far below minVisibleWeight:
+//   - by default (0.01) the blend fades out: weight k = b_k v_k / 0.01, all of them together
+//     at most 4.9e-18, instead of handing the whole weight to the least hidden probe;
+//   - with minVisibleWeight 0 it renormalizes fully, weighted by relative visibility: b_k v_k /
+//     sum_j b_j v_j (the common 1e-12 cancels). The nearest probe of the cell has the largest
+//     v, so it gets at least its barycentric weight and the farthest at most its, and the
+//     blend is clearly not the barycentric one;
+//   - a minVisibleWeight of half or twice the point's own visible weight gives the full
+//     renormalization or half of it: the threshold is max(sum, minVisibleWeight).
+// Closed forms to 1e-4 relative, as for one probe.
+TEST(ProbeBlend, AllHiddenFadesOutOrIsWeightedByRelativeVisibility) {
   const ProbeSet s = allHiddenSet();
   const Texel wall = wallTexel(0.1f, kMaxDistance);
-  const ProbeBlendSettings blend;
+  const ProbeBlendSettings fade;
+  ProbeBlendSettings full;
+  full.minVisibleWeight = 0.0f;
+  ASSERT_EQ(fade.minVisibleWeight, 0.01f);
   int tested = 0, differ = 0;
   for (const glm::vec3 p : pointsInCube(2000, 12)) {
-    const ProbeLocation loc = locateProbe(s, p, -1, blend);
+    const ProbeLocation loc = locateProbe(s, p, -1, full);
     if (nearestProbeOfCell(s, loc, p) < 0.45) continue;
     ++tested;
     double v[4], sum = 0.0, largest = 0.0;
@@ -580,7 +593,7 @@ TEST(ProbeBlend, AllHiddenIsWeightedByRelativeVisibility) {
       v[k] = 0.0;
       if (loc.barycentric[k] == 0.0f) continue;
       const double distance = glm::length(p - s.positions[size_t(loc.probes[k])]);
-      v[k] = expectedVisibility(wall, kMaxDistance, distance, blend);
+      v[k] = expectedVisibility(wall, kMaxDistance, distance, full);
       // At most 4.9e-20 (0.45 m), at least 1.36e-24 (d clamped to 1: c = 1.1e-4).
       EXPECT_LE(v[k], 5e-20);
       EXPECT_GE(v[k], 1.3e-24);
@@ -588,11 +601,24 @@ TEST(ProbeBlend, AllHiddenIsWeightedByRelativeVisibility) {
       if (distance < nearestDistance) nearestDistance = distance, nearest = k;
       if (distance > farthestDistance) farthestDistance = distance, farthest = k;
     }
+    const ProbeLocation faded = locateProbe(s, p, -1, fade);
+    ProbeBlendSettings half = full, twice = full;
+    half.minVisibleWeight = float(sum / 2.0);
+    twice.minVisibleWeight = float(sum * 2.0);
+    const ProbeLocation belowSum = locateProbe(s, p, -1, half);
+    const ProbeLocation aboveSum = locateProbe(s, p, -1, twice);
+    double fadedSum = 0.0;
     for (int k = 0; k < 4; ++k) {
       const double expected = loc.barycentric[k] * v[k] / sum;
       EXPECT_NEAR(loc.weights[k], expected, 1e-4 * expected + 1e-7) << k;
+      EXPECT_NEAR(belowSum.weights[k], expected, 1e-4 * expected + 1e-7) << k;
+      EXPECT_NEAR(aboveSum.weights[k], expected / 2.0, 1e-4 * expected + 1e-7) << k;
+      const double expectedFaded = loc.barycentric[k] * v[k] / 0.01;
+      EXPECT_NEAR(faded.weights[k], expectedFaded, 1e-4 * expectedFaded) << k;
+      fadedSum += faded.weights[k];
       largest = std::max(largest, std::fabs(double(loc.weights[k]) - loc.barycentric[k]));
     }
+    EXPECT_LE(fadedSum, 4.9e-18);
     EXPECT_GE(loc.weights[nearest], loc.barycentric[nearest] * (1.0f - 1e-5f));
     EXPECT_LE(loc.weights[farthest], loc.barycentric[farthest] * (1.0f + 1e-5f));
     differ += largest > 0.05;
@@ -603,15 +629,18 @@ TEST(ProbeBlend, AllHiddenIsWeightedByRelativeVisibility) {
 
 // Equal visibility gives the barycentric weights: with minSigma 1e-4 m (w = 5e-5) the same
 // points get c <= 2.5e-9 / 0.165^2 = 9.2e-8 from every probe, so c^3 x 1e-12 < 1e-33 and every
-// v is the floor itself; the floors cancel and the blend is the barycentric one (to float
-// rounding of b * floor / sum).
+// v is the floor itself; renormalized fully (minVisibleWeight 0) the floors cancel and the
+// blend is the barycentric one (to float rounding of b * floor / sum); by default it fades to
+// b x 1e-30 / 0.01.
 TEST(ProbeBlend, EqualVisibilityGivesTheBarycentricWeights) {
   const ProbeSet s = allHiddenSet();
   ProbeBlendSettings blend;
   blend.minSigma = 1e-4f;
+  ProbeBlendSettings full = blend;
+  full.minVisibleWeight = 0.0f;
   int tested = 0;
   for (const glm::vec3 p : pointsInCube(2000, 12)) {
-    const ProbeLocation loc = locateProbe(s, p, -1, blend);
+    const ProbeLocation loc = locateProbe(s, p, -1, full);
     if (nearestProbeOfCell(s, loc, p) < 0.45) continue;
     ++tested;
     for (int k = 0; k < 4; ++k) {
@@ -621,7 +650,13 @@ TEST(ProbeBlend, EqualVisibilityGivesTheBarycentricWeights) {
                                 offset, blend),
                 kVisibilityFloor);
     }
-    for (int k = 0; k < 4; ++k) EXPECT_NEAR(loc.weights[k], loc.barycentric[k], 1e-6f);
+    const ProbeLocation faded = locateProbe(s, p, -1, blend);
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_NEAR(loc.weights[k], loc.barycentric[k], 1e-6f);
+      const double expected = loc.barycentric[k] * double(kVisibilityFloor) / 0.01;
+      // b x 1e-30 can be subnormal (b < 1.2e-8): absolute float steps of 1.4e-45 / 0.01.
+      EXPECT_NEAR(faded.weights[k], expected, 1e-5 * expected + 1e-42);
+    }
   }
   EXPECT_GT(tested, 300);
 }
@@ -1166,7 +1201,8 @@ TEST(ProbeVisibilityFile, ImpossibleSpreadIsNamed) {
 
 // Bit flips in the visibility block or its header word, with the checksum recomputed so that
 // the validation itself is reached: the reader never crashes, and whatever it accepts gives
-// lookups with finite weights >= 0 summing to 1.
+// lookups with finite weights >= 0 summing to at most 1 (less where the blend fades out,
+// below minVisibleWeight) and, renormalized fully (minVisibleWeight 0), to 1.
 TEST(ProbeVisibilityFile, CorruptionPastTheChecksumIsCaughtOrHarmless) {
   const ProbeSet s = setWithVariedMaps();
   const std::vector<uint8_t> good = serializeProbeSet(s);
@@ -1185,14 +1221,20 @@ TEST(ProbeVisibilityFile, CorruptionPastTheChecksumIsCaughtOrHarmless) {
     Result<ProbeSet> r = parseProbeSet(b, "fuzz");
     if (!r.ok()) continue;
     ++accepted;
+    ProbeBlendSettings full;
+    full.minVisibleWeight = 0.0f;
     for (const glm::vec3 p : points) {
-      const ProbeLocation loc = locateProbe(*r, p);
-      float sum = 0.0f;
-      for (float w : loc.weights) {
-        ASSERT_TRUE(std::isfinite(w) && w >= 0.0f) << i;
-        sum += w;
+      const ProbeLocation loc = locateProbe(*r, p), renormalized = locateProbe(*r, p, -1, full);
+      float sum = 0.0f, renormalizedSum = 0.0f;
+      for (int k = 0; k < 4; ++k) {
+        ASSERT_TRUE(std::isfinite(loc.weights[k]) && loc.weights[k] >= 0.0f) << i;
+        ASSERT_TRUE(std::isfinite(renormalized.weights[k]) && renormalized.weights[k] >= 0.0f)
+            << i;
+        sum += loc.weights[k];
+        renormalizedSum += renormalized.weights[k];
       }
-      ASSERT_NEAR(sum, 1.0f, 1e-5f) << i;
+      ASSERT_LE(sum, 1.0f + 1e-5f) << i;
+      ASSERT_NEAR(renormalizedSum, 1.0f, 1e-5f) << i;
     }
   }
   // Most flips in the moments leave a valid distribution (a different depth), so the

@@ -199,6 +199,7 @@ static void testVisibility(const char* path) {
   /* x = 1.5 is 0.5 m from probe 1, beyond its wall at 0.3 m; x = 1.8 is 0.2 m from it, in
    * front of the wall. */
   const float behind[3] = {1.5f, 0.0f, 0.0f}, before[3] = {1.8f, 0.0f, 0.0f};
+  const float pastEnd[3] = {2.5f, 0.0f, 0.0f};
   const float positions[6] = {1.5f, 0.0f, 0.0f, 1.8f, 0.0f, 0.0f};
   float normals[6] = {0.0f, 0.0f, 0.0f, -1.0f, 0.0f, 0.0f};
   int32_t hints[2] = {-1, -1};
@@ -247,6 +248,17 @@ static void testVisibility(const char* path) {
   /* kiln_probes_locate uses the default blend: the same answer. */
   CHECK(kiln_probes_locate(probes, behind, -1, &single[0]) == KILN_OK);
   CHECK(memcmp(&single[0], &loc, sizeof(loc)) == 0);
+  /* Past the end of the line (x = 2.5) probe 1 has all the barycentric weight and is hidden
+   * (0.5 m away, behind its wall): its visible weight 1.8e-18 is below the blend's 1% floor
+   * (kiln::ProbeBlendSettings::minVisibleWeight), so the blend fades out, weight v / 0.01,
+   * instead of renormalizing onto the hidden probe: the SH is ~0, not probe 1's. */
+  CHECK(kiln_probes_locate(probes, pastEnd, -1, &single[0]) == KILN_OK);
+  CHECK(single[0].barycentric[0] == 0.0f && single[0].barycentric[1] == 1.0f);
+  expected = hiddenVisibility(0.5) / 0.01;
+  CHECK(single[0].weights[0] == 0.0f);
+  CHECK(within(single[0].weights[1], expected, 1e-4 * expected));
+  CHECK(kiln_probes_sample_sh(probes, &single[0], sh) == KILN_OK);
+  CHECK(fabs(sh[0]) < 1e-15 && fabs(sh[2]) < 1e-15);
 
   /* The blend's min_sigma and distance_bias reach the test. min_sigma 0.2 m (w = 0.1) puts
    * the point inside the reach factor's ramp, (d - far) / w = 0.9, with sigma at 0.1:

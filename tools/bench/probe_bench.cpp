@@ -10,9 +10,9 @@
 //     structure must beat, on fewer probes;
 //   - BlendHinted: the hinted path's lookup plus the SH blend (locateProbe + interpolateProbes),
 //     on the same random probes given synthetic visibility maps at the bake's default
-//     resolution (24 x 24 texels of {mu, sigma, far}), with visibility weighting
-//     (visibility:1) and without (visibility:0, the plain barycentric blend of the same set):
-//     the two rows of one probe count give the cost of leak-free blending as a ratio (the aim
+//     resolution (kDefaultVisibilityResolution; {mu, sigma, far} per texel), with visibility
+//     weighting (visibility:1) and without (visibility:0, the plain barycentric blend of the same
+//     set): the two rows of one probe count give the cost of leak-free blending as a ratio (the aim
 //     is at most 2x). bytes_per_probe is the .kprobe size (serializeProbeSet) over the probe
 //     count, with the visibility block (visibility:1) and without it (0); hidden_share is the
 //     share of the blend's probe tests that find the point (partly) hidden (v < 1).

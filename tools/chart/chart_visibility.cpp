@@ -6,8 +6,6 @@
 // field error, as chart 2.
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
-#include <cstdlib>
 #include <memory>
 
 #include "kiln/probe_runtime.h"
@@ -100,7 +98,7 @@ Result<ChartTable> probeVisibilityChart(const ChartOptions& o) {
   const std::vector<WallScene> scenes = {{"two_rooms.gltf", "two_rooms", 4.0f, 4.25f},
                                          {"two_rooms_thin.gltf", "two_rooms_thin", 4.0f, 4.05f}};
   const std::vector<int32_t> resolutions =
-      o.quick ? std::vector<int32_t>{0, 16, 24} : std::vector<int32_t>{0, 8, 12, 16, 20, 24, 32};
+      o.quick ? std::vector<int32_t>{0, 24, 32} : std::vector<int32_t>{0, 8, 12, 16, 20, 24, 32};
   const uint32_t wallPoints = o.quick ? 100 : 300;
   const uint32_t roomPoints = o.quick ? 100 : 500;
   const uint32_t truthRays = o.quick ? 512 : 2048;
@@ -222,7 +220,6 @@ Result<ChartTable> probeVisibilityChart(const ChartOptions& o) {
 
     for (const ProbeLayout& layout : layouts) {
       for (int32_t r : resolutions) {
-        if (std::getenv("KDBG") && (std::string(w.label) != "two_rooms_thin" || layout.name != "octree corners" || r != 24)) continue;
         if (o.cancel && o.cancel->load()) return Error{"cancelled"};
         ProbeBakeSettings bake;
         bake.rays = layout.rays;
@@ -237,12 +234,6 @@ Result<ChartTable> probeVisibilityChart(const ChartOptions& o) {
         if (!set)
           return Error{path + ": " + layout.name + ", resolution " + std::to_string(r) + ": " +
                        set.error()};
-        if (std::getenv("KHASH")) {
-          const std::vector<uint8_t> bytes = serializeProbeSet(*set);
-          std::vector<uint8_t> sh(reinterpret_cast<const uint8_t*>(set->sh.data()), reinterpret_cast<const uint8_t*>(set->sh.data() + set->sh.size()));
-          std::vector<uint8_t> vm(reinterpret_cast<const uint8_t*>(set->visibility.moments.data()), reinterpret_cast<const uint8_t*>(set->visibility.moments.data() + set->visibility.moments.size()));
-          std::fprintf(stderr, "HASH %s %s R%d all %016llx sh %016llx vis %016llx\n", w.label, layout.name.c_str(), r, (unsigned long long)fnv1a64(bytes), (unsigned long long)fnv1a64(sh), (unsigned long long)fnv1a64(vm));
-        }
         const FieldError near = measureFieldError(*set, wall, wallTruth, floor, o.threads);
         const FieldError overall = measureFieldError(*set, room, roomTruth, floor, o.threads);
         size_t over = 0;

@@ -334,7 +334,7 @@ int runCompare(const CompareOptions& o) {
     nearWall[i] = probePoint(scene, tracer, points[i], 256).nearestDistance < 0.5f;
 
   // Every method's probes are baked once, with visibility maps as `kiln probes bake` makes
-  // them (per-probe maxDistance from the topology), and measured with both blends.
+  // them (per-probe maxDistance to the scene's farthest corner), and measured with both blends.
   bake.seed = o.common.seed;
   bake.visibilityResolution = o.common.visibilityResolution > 0 ? o.common.visibilityResolution
                                                                  : kDefaultVisibilityResolution;
@@ -537,7 +537,8 @@ void registerProbesPlaceCommand(CLI::App& probes) {
       ->capture_default_str();
   c->add_option("--eval-rays", compare->evalRays,
                 "Rays per probe and per evaluation point (the probes also record visibility "
-                "maps, at --visibility-resolution or 16 when that is 0)")
+                "maps, at --visibility-resolution, or at " +
+                    std::to_string(kDefaultVisibilityResolution) + " when that is 0)")
       ->check(CLI::Range(1, 1 << 24))
       ->capture_default_str();
   c->add_option("--eval-seed", compare->evalSeed,

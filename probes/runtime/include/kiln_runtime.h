@@ -43,8 +43,10 @@ typedef enum kiln_status {
 /* A loaded probe set (opaque, reference counted). */
 typedef struct kiln_probes kiln_probes;
 
-/* Result of a lookup: weights are >= 0 and sum to 1. Unused slots repeat probes[0] with weight
- * 0. Pass `cell` back as the hint of the next lookup for the same object.
+/* Result of a lookup: weights are >= 0 and sum to 1 (less only where the cell's probes see the
+ * point with under 1% of its barycentric weight: the blend fades out there rather than take
+ * the light of probes that cannot see it). Unused slots repeat probes[0] with weight 0. Pass
+ * `cell` back as the hint of the next lookup for the same object.
  * `weights` are the blend's: with visibility, barycentric[k] x probe k's visibility of the
  * point, renormalized; without, equal to `barycentric`. `barycentric` are the cell's own
  * weights of the point (>= 0, sum 1; the same whatever the blend), e.g. to see how much

@@ -124,7 +124,8 @@ float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDis
   }
   mean *= kUnorm16;
   far *= kUnorm16;
-  const float minSigma = s.minSigma * inverseD;
+  // A zero minSigma (allowed from C++) would make the far ramp a 0/0 at d = far.
+  const float minSigma = std::max(s.minSigma, 1e-6f) * inverseD;
   // Beyond the farthest any of the texels' rays went, every ray stopped short of the point:
   // hidden, whatever a wide (e.g. two-surface) distribution lets Chebyshev's bound say. The
   // cut is a ramp minSigma wide, so v stays continuous in d.

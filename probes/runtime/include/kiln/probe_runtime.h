@@ -22,7 +22,8 @@
 
 namespace kiln {
 
-// Where a point is: the cell, its probes and their weights (>= 0, summing to 1). Slots a cell
+// Where a point is: the cell, its probes and their weights (>= 0, summing to 1, or less where
+// the visibility-weighted blend fades out: ProbeBlendSettings::minVisibleWeight). Slots a cell
 // does not use (outer cells, lower dimensions) repeat probes[0] with weight 0, so a caller may
 // blend all four blindly.
 struct ProbeLocation {
@@ -43,8 +44,9 @@ inline constexpr int kMaxWalkSteps = 4096;
 ProbeLocation locateProbe(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
                           const ProbeBlendSettings& blend = {}) noexcept;
 
-// Replaces location.weights by location.barycentric x each probe's visibility of p,
-// renormalized (plain barycentric when blend.visibility is false or the set has none).
+// Replaces location.weights by location.barycentric x each probe's visibility of p, divided by
+// max(their sum, blend.minVisibleWeight) (plain barycentric when blend.visibility is false or
+// the set has none).
 void weightByVisibility(const ProbeSet& set, glm::vec3 p, ProbeLocation& location,
                         const ProbeBlendSettings& blend = {}) noexcept;
 

@@ -11,25 +11,24 @@
 // depth edges and noise, not the tilt. At run time the weight of probe k for a point p is its
 // barycentric weight times
 //
-//   v_k(p) = c(d) * clamp(1 - (d - far) / w, 0, 1),    w = minSigma / D,
+//   v_k(p) = max(c(d) * clamp(1 - (d - far) / w, 1e-12, 1), kVisibilityFloor),
 //   c(d)   = 1                                           if d <= mu
-//          = (sigma^2 / (sigma^2 + (d - mu)^2))^3        otherwise
+//          = (s2 / (s2 + (d - mu)^2))^3                  otherwise,    w = minSigma / D,
 //
 // where d = min(|p' - x_k| - distanceBias, D) / D is the normalized distance from the probe to
 // the biased point p' = p + normalBias * n (n: the surface normal at p, when the caller has
-// one), mu, sigma^2 and far are bilinearly interpolated from the four texels around the
-// direction from the probe to p', and sigma^2 is at least (minSigma / D)^2. c is the one-sided
-// Chebyshev bound on the probability that the surface along that direction lies beyond d
-// (variance shadow maps; DDGI, Majercik et al. 2019, cubes it to sharpen the cut-off); the
-// second factor hides a point beyond the farthest depth the texels' rays reached, which a
-// texel holding two surfaces (a probe next to a wall looking along it) would otherwise let
-// through with a loose bound. The
-// weights are renormalized. v never reaches 0 (the second factor bottoms out at 1e-12, v at
-// kVisibilityFloor), so a point that every probe of its cell is hidden from still gets a
-// defined blend, weighted towards the least hidden probes, and the blend is continuous in p
-// (the map
-// is sampled with octahedral wrapping, the test is continuous in d, mu and sigma, and a face
-// shared by two cells has the same three probes with the same weights on both sides).
+// one), mu, sigma and far are bilinearly interpolated from the four texels around the
+// direction from the probe to p', and s2 = max(sigma, w)^2. c is the one-sided Chebyshev
+// bound on the probability that the surface along that direction lies beyond d (variance
+// shadow maps; DDGI, Majercik et al. 2019, cubes it to sharpen the cut-off); the second factor
+// hides a point beyond the farthest depth the texels' rays reached, which a texel holding two
+// surfaces (a probe next to a wall looking along it) would otherwise let through with a loose
+// bound. The weights b_k v_k are divided by max(sum_j b_j v_j, minVisibleWeight): they sum to
+// 1 where the cell's probes see the point with at least that share of the barycentric weight,
+// and fade towards 0 (black) at a point that none of them sees. v never reaches 0, so the
+// blend is always defined, and it is continuous in p (the map is sampled with octahedral
+// wrapping, the test is continuous in d, mu, sigma and far, and a face shared by two cells has
+// the same three probes with the same weights on both sides).
 //
 // Only GLM: this is part of kiln_runtime.
 #pragma once
