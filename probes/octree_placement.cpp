@@ -49,6 +49,19 @@ ivec3 unpackKey(uint64_t k) {
   return ivec3(int(k & mask), int((k >> 21) & mask), int(k >> 42));
 }
 
+// The box around the volumes, and the side of the cube the octree's root covers from its
+// minimum corner (0 when the box is empty).
+Bounds3 boundsOf(std::span<const Bounds3> volumes) {
+  Bounds3 box;
+  for (const Bounds3& b : volumes) box.extend(b);
+  return box;
+}
+float rootSide(const Bounds3& box) {
+  if (box.empty()) return 0.0f;
+  const vec3 extent = box.extent();
+  return std::max({extent.x, extent.y, extent.z});
+}
+
 struct OctreeWalk {
   vec3 origin;
   float cell;  // finest cell side
@@ -115,26 +128,24 @@ Result<OctreePlacement> octreeCornerPlacement(const Scene& scene, const Tracer& 
   if (!(settings.cellSize >= 0.0f) || !std::isfinite(settings.cellSize))
     return Error{"octree placement: cellSize must be a finite number >= 0"};
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
-  Bounds3 box;
-  for (const Bounds3& b : volumes) box.extend(b);
-  const vec3 extent = box.extent();
-  const float side = std::max({extent.x, extent.y, extent.z});
-  if (box.empty() || !(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
+  const Bounds3 box = boundsOf(volumes);
+  const float side = rootSide(box);
+  if (!(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
 
   OctreePlacement out;
   int level = settings.level;
-  float rootSide = side;
+  float rootCube = side;
   if (settings.cellSize > 0.0f) {
     level = 1;
     while (level < 10 && settings.cellSize * float(1 << level) < side) ++level;
-    rootSide = settings.cellSize * float(1 << level);
-    if (rootSide < side)
+    rootCube = settings.cellSize * float(1 << level);
+    if (rootCube < side)
       return Error{"octree placement: cellSize " + std::to_string(settings.cellSize) +
                    " m needs more than 1024 cells across the volumes"};
   }
-  out.cellSize = rootSide / float(1 << level);
+  out.cellSize = rootCube / float(1 << level);
   const std::vector<ivec3> lattice =
-      octreeLeafCorners(scene, box.min, rootSide, level, &out.leafCells);
+      octreeLeafCorners(scene, box.min, rootCube, level, &out.leafCells);
   if (out.leafCells == 0) return Error{"octree placement: no static triangle in the volumes"};
 
   // Corners inside the volumes (a hair of tolerance: corners on a volume's face count).
@@ -190,11 +201,9 @@ Result<std::vector<vec3>> octreeCornerPositions(const Scene& scene, const Tracer
                                                 uint32_t count) {
   if (count < 4) return Error{"octree placement: count must be at least 4"};
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
-  Bounds3 box;
-  for (const Bounds3& b : volumes) box.extend(b);
-  const vec3 extent = box.extent();
-  const float side = std::max({extent.x, extent.y, extent.z});
-  if (box.empty() || !(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
+  const Bounds3 box = boundsOf(volumes);
+  const float side = rootSide(box);
+  if (!(side > 0.0f)) return Error{"octree placement: the volumes are empty"};
   OctreePlacementSettings s = settings;
   auto place = [&](float cell) -> Result<std::vector<vec3>> {
     s.cellSize = cell;
@@ -224,21 +233,12 @@ Result<std::vector<vec3>> octreeCornerPositions(const Scene& scene, const Tracer
   if (best.size() < count)
     return Error{"octree placement: fewer than " + std::to_string(count) +
                  " valid corners at 1024 cells across the volumes"};
-  for (int i = 0; i < 14 && best.size() != count; ++i) {
-    const float mid = 0.5f * (lo + hi);
-    Result<std::vector<vec3>> r = place(mid);
-    if (r && r->size() >= count) {
-      lo = mid;
-      best = std::move(*r);
-    } else {
-      hi = mid;
-    }
-  }
-  std::vector<vec3> out;
-  out.reserve(count);
-  for (uint32_t k = 0; k < count; ++k)
-    out.push_back(best[size_t(uint64_t(k) * best.size() / count)]);
-  return out;
+  return largestSpacingWithCount(lo, hi, count, std::move(best),
+                                 [&](float cell) -> std::optional<std::vector<vec3>> {
+                                   Result<std::vector<vec3>> r = place(cell);
+                                   if (!r) return std::nullopt;
+                                   return std::move(r).value();
+                                 });
 }
 
 }  // namespace kiln

@@ -275,13 +275,20 @@ Result<std::vector<vec3>> uniformGridPositions(const Scene& scene, const Tracer&
     best = validGrid(scene, tracer, volumes, lo, validity, threads);
   }
   if (best.size() < count) return Error{"uniform grid: too few valid points in the volumes"};
-  float hi = lo * 2.0f;
+  return largestSpacingWithCount(lo, 2.0f * lo, count, std::move(best), [&](float h) {
+    return std::optional(validGrid(scene, tracer, volumes, h, validity, threads));
+  });
+}
+
+std::vector<vec3> largestSpacingWithCount(
+    float lo, float hi, uint32_t count, std::vector<vec3> best,
+    const std::function<std::optional<std::vector<vec3>>(float spacing)>& generate) {
   for (int i = 0; i < 14 && best.size() != count; ++i) {
     const float mid = 0.5f * (lo + hi);
-    std::vector<vec3> g = validGrid(scene, tracer, volumes, mid, validity, threads);
-    if (g.size() >= count) {
+    std::optional<std::vector<vec3>> g = generate(mid);
+    if (g && g->size() >= count) {
       lo = mid;
-      best = std::move(g);
+      best = std::move(*g);
     } else {
       hi = mid;
     }
@@ -308,6 +315,30 @@ float irradianceRms(const ShL2Rgb& sh) {
     sum += e * e;
   }
   return std::sqrt(sum / 6.0f);
+}
+
+float maxAxisIrradiance(const ShL2Rgb& sh) {
+  float m = 0.0f;
+  for (const vec3& n : kAxisNormals) m = std::max(m, luminance(sh.irradiance(n)));
+  return m;
+}
+
+ShL2Rgb lightThroughWall(const Tracer& tracer, const ProbeSet& set, vec3 p,
+                         const ProbeLocation& loc, float wallX, size_t* seen) {
+  ShL2Rgb sum;
+  for (int k = 0; k < 4; ++k) {
+    if (loc.probes[k] < 0 || !(loc.weights[k] > 0.0f)) continue;
+    const size_t i = size_t(loc.probes[k]);
+    if ((set.positions[i].x < wallX) == (p.x < wallX)) continue;  // same side as p
+    const vec3 to = set.positions[i] - p;
+    const float length = glm::length(to);
+    if (!tracer.occluded(Ray{p, to / length, 0.0f, length})) {
+      if (seen) ++*seen;
+      continue;
+    }
+    sum += set.sh[i] * loc.weights[k];
+  }
+  return sum;
 }
 
 float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {

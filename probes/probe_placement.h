@@ -26,11 +26,13 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "kiln/probe_runtime.h"
 #include "kiln/probe_set.h"
 #include "kiln/probe_visibility.h"
 #include "probes/probe_baker.h"
@@ -115,6 +117,14 @@ Result<std::vector<vec3>> uniformGridPositions(const Scene& scene, const Tracer&
                                                const ProbeValiditySettings& validity,
                                                int threads = 0);
 
+// The baselines' count search (uniformGridPositions, octreeCornerPositions): `best` holds at
+// least `count` points, made by `generate(lo)`; halves [lo, hi] up to 14 times towards the
+// largest spacing whose `generate` still gives at least `count` (nullopt: none), then keeps
+// `count` of that set, spread evenly over it (every size / count-th in its order).
+std::vector<vec3> largestSpacingWithCount(
+    float lo, float hi, uint32_t count, std::vector<vec3> best,
+    const std::function<std::optional<std::vector<vec3>>(float spacing)>& generate);
+
 struct ProbePlacementSettings {
   std::vector<Bounds3> volumes;  // empty = the bounds of the static objects
   uint32_t budget = 256;         // most probes placed (>= 4)
@@ -193,6 +203,15 @@ inline constexpr float kErrorFloorFraction = 0.05f;
 float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
 // RMS over the six axis normals of the luminance of E.
 float irradianceRms(const ShL2Rgb& sh);
+// Largest luminance of E over the six axis normals (the leak tests' and chart's measure).
+float maxAxisIrradiance(const ShL2Rgb& sh);
+
+// What the blend at `location` (the lookup of p) takes from the probes behind a wall: those on
+// the far side of the plane x = wallX from p that do not see p (geometry on the segment
+// between them). `seen`, when given, counts the far-side probes that do see p (through a
+// doorway). The measure of light leaking through a wall at x = wallX.
+ShL2Rgb lightThroughWall(const Tracer& tracer, const ProbeSet& set, vec3 p,
+                         const ProbeLocation& location, float wallX, size_t* seen = nullptr);
 
 // Interpolation error of a probe field at check points, against SH baked at the points.
 struct FieldError {

@@ -63,20 +63,6 @@ ProbePlacementSettings quickPlacement(uint32_t budget) {
   return s;
 }
 
-float luminance(vec3 c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
-
-// Largest luminance of the irradiance over the six axis normals.
-float maxAxisIrradiance(const ShL2Rgb& sh) {
-  float m = 0.0f;
-  for (int a = 0; a < 3; ++a)
-    for (float s : {-1.0f, 1.0f}) {
-      vec3 n(0.0f);
-      n[a] = s;
-      m = std::max(m, luminance(probeIrradiance(sh, n)));
-    }
-  return m;
-}
-
 // A two-room scene of docs/scenes.md: room A x in [0, faceA], the shared wall x in [faceA,
 // faceB], room B x in [faceB, faceB + 4]; the sun comes through room A's window onto room A's
 // floor and the wall's room-A face (z 1.12..2.09, up to y = 0.87); the doorway is z 2.8..3.8.
@@ -314,25 +300,6 @@ const BehindTheWall& behindTheWall(const WallScene& w) {
   return cache.emplace(w.file, std::move(b)).first->second;
 }
 
-// What the blend at `loc` takes from the probes on room A's side of the wall's mid-plane that
-// do not see p (geometry on the segment between them); `seen` counts those that do.
-ShL2Rgb lightThroughTheWall(const Tracer& tracer, const ProbeSet& set, vec3 p,
-                            const ProbeLocation& loc, float mid, size_t* seen = nullptr) {
-  ShL2Rgb sum;
-  for (int k = 0; k < 4; ++k) {
-    const size_t i = size_t(loc.probes[k]);
-    if (!(loc.weights[k] > 0.0f) || set.positions[i].x >= mid) continue;
-    const vec3 to = set.positions[i] - p;
-    const float length = glm::length(to);
-    if (!tracer.occluded(Ray{p, to / length, 0.0f, length})) {
-      if (seen) ++*seen;
-      continue;
-    }
-    sum += set.sh[i] * loc.weights[k];
-  }
-  return sum;
-}
-
 struct Ratios {
   std::vector<float> sorted;  // ascending
   size_t over = 0;            // entries above 1
@@ -392,11 +359,11 @@ void expectNoLightThroughTheWall(const WallScene& w, Layout layout) {
     const float bound = 2.0f * b.truth[i] + 0.01f * b.mirrorTruth[i];
     const ProbeLocation loc = locateProbe(set, p);
     outer += loc.cell >= set.innerCellCount ? 1 : 0;
-    const float leak = maxAxisIrradiance(lightThroughTheWall(tracer, set, p, loc, w.mid(), &seen));
+    const float leak = maxAxisIrradiance(lightThroughWall(tracer, set, p, loc, w.mid(), &seen));
     ratio.push_back(leak / bound);
     wholeRatio.push_back(maxAxisIrradiance(interpolateProbes(set, loc)) / bound);
     const ProbeLocation flat = locateProbe(set, p, -1, plain);
-    plainRatio.push_back(maxAxisIrradiance(lightThroughTheWall(tracer, set, p, flat, w.mid())) /
+    plainRatio.push_back(maxAxisIrradiance(lightThroughWall(tracer, set, p, flat, w.mid())) /
                          bound);
     EXPECT_LE(leak, bound) << w.file << ", " << layoutName(layout) << ": at (" << p.x << ", " << p.y
                            << ", " << p.z << ") room A's probes give " << leak
@@ -528,11 +495,11 @@ TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
       if (at != dim.end()) roomB = std::max(roomB, truthDim[size_t(at - dim.begin())]);
     }
     const float e = maxAxisIrradiance(interpolateProbes(set, loc));
-    const float leak = maxAxisIrradiance(lightThroughTheWall(*l.tracer, set, p, loc, w.mid()));
+    const float leak = maxAxisIrradiance(lightThroughWall(*l.tracer, set, p, loc, w.mid()));
     const ProbeLocation flat = locateProbe(set, p, -1, plain);
     const float ePlain = maxAxisIrradiance(interpolateProbes(set, flat));
     const float leakPlain =
-        maxAxisIrradiance(lightThroughTheWall(*l.tracer, set, p, flat, w.mid()));
+        maxAxisIrradiance(lightThroughWall(*l.tracer, set, p, flat, w.mid()));
     worstLeak = std::max(worstLeak, leak / (2.0f * eB + 0.01f * eA));
     worstBlend = std::max(worstBlend, e / (kRoomBNoise * roomB));
     plainLeak = std::max(plainLeak, leakPlain / eA);

@@ -34,20 +34,6 @@ std::string list(const std::vector<int32_t>& v) {
   return s;
 }
 
-float luminance(vec3 c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
-
-// Largest luminance of the irradiance over the six axis normals (the wall tests' measure).
-float maxAxisIrradiance(const ShL2Rgb& sh) {
-  float m = 0.0f;
-  for (int a = 0; a < 3; ++a)
-    for (float s : {-1.0f, 1.0f}) {
-      vec3 n(0.0f);
-      n[a] = s;
-      m = std::max(m, luminance(probeIrradiance(sh, n)));
-    }
-  return m;
-}
-
 // Bytes the visibility block adds per probe: maxDistance (f32) and R^2 texels of
 // {mu, sigma, far} as unorm16.
 size_t visibilityBytesPerProbe(int32_t r) {
@@ -68,23 +54,6 @@ struct WallScene {
   // from room A's probes that do not see the point is a leak.
   Bounds3 band() const { return Bounds3{vec3(faceB, 0.0f, 0.0f), vec3(faceB + 0.6f, 3.0f, 2.3f)}; }
 };
-
-// What the blend at `loc` takes from the probes on room A's side of the wall's mid-plane that
-// do not see p (geometry on the segment between them).
-ShL2Rgb lightThroughTheWall(const Tracer& tracer, const ProbeSet& set, vec3 p,
-                            const ProbeLocation& loc, float mid) {
-  ShL2Rgb sum;
-  for (int k = 0; k < 4; ++k) {
-    if (loc.probes[k] < 0 || !(loc.weights[k] > 0.0f)) continue;
-    const size_t i = size_t(loc.probes[k]);
-    if (set.positions[i].x >= mid) continue;
-    const vec3 to = set.positions[i] - p;
-    const float length = glm::length(to);
-    if (!tracer.occluded(Ray{p, to / length, 0.0f, length})) continue;
-    sum += set.sh[i] * loc.weights[k];
-  }
-  return sum;
-}
 
 struct ProbeLayout {
   std::string name;
@@ -241,7 +210,7 @@ Result<ChartTable> probeVisibilityChart(const ChartOptions& o) {
         for (size_t i = 0; i < wall.size(); ++i) {
           const ProbeLocation loc = locateProbe(*set, wall[i]);
           const float ratio =
-              maxAxisIrradiance(lightThroughTheWall(tracer, *set, wall[i], loc, w.mid())) /
+              maxAxisIrradiance(lightThroughWall(tracer, *set, wall[i], loc, w.mid())) /
               bound[i];
           over += ratio > 1.0f ? 1 : 0;
           worst = std::max(worst, ratio);
