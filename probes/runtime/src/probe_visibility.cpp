@@ -33,8 +33,9 @@ inline int32_t wrapTexel(int32_t i, int32_t j, int32_t r) {
 }
 
 constexpr float kUnorm16 = 1.0f / 65535.0f;
-// The reach factor of a point beyond every ray of its texels: tiny, not 0, so that a cell
-// whose probes are all hidden still weights them by how hidden each is.
+// The reach factor of a point beyond every ray of its texels: tiny, not 0, so that v stays
+// above 0 and, with minVisibleWeight 0 (full renormalization), a cell whose probes are all
+// hidden still weights them by how hidden each is.
 constexpr float kHiddenReach = 1e-12f;
 
 // octahedralFootprint, inline so that probeVisibility (four calls per lookup) keeps the texels
