@@ -208,6 +208,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     return Error{"visibility max distance must be a finite number >= 0"};
   for (size_t i = 0; i < positions.size(); ++i) {
     if (!isFinite(positions[i])) return Error{"positions[" + std::to_string(i) + "]: not finite"};
+    if (glm::any(glm::greaterThan(glm::abs(positions[i]), vec3(kMaxProbeCoordinate))))
+      return Error{"positions[" + std::to_string(i) + "]: a coordinate beyond " +
+                   std::to_string(int64_t(kMaxProbeCoordinate)) + " m"};
   }
   ProbeBakeReport local;
   ProbeBakeReport& rep = report ? *report : local;
@@ -343,6 +346,9 @@ Result<std::vector<vec3>> parseProbePositions(std::string_view text, std::string
     }
     if (!ok || !isFinite(v))
       return Error{prefix + "positions[" + std::to_string(i) + "]: expected 3 finite numbers"};
+    if (glm::any(glm::greaterThan(glm::abs(v), vec3(kMaxProbeCoordinate))))
+      return Error{prefix + "positions[" + std::to_string(i) + "]: a coordinate beyond " +
+                   std::to_string(int64_t(kMaxProbeCoordinate)) + " m"};
     out.push_back(v);
   }
   if (out.empty()) return Error{prefix + "positions: empty"};

@@ -43,6 +43,10 @@ namespace kiln {
 // Probes in enclosed rooms see a lot of multiply bounced light (a white Cornell box loses
 // ~5% of its irradiance at 8 bounces); Russian roulette keeps the long paths cheap.
 inline constexpr int kDefaultProbeBounces = 16;
+// Largest probe coordinate accepted (metres, each axis): 10,000 km, far beyond any level and
+// far inside what Embree can trace from (a probe at 1e20 aborted inside it).
+inline constexpr float kMaxProbeCoordinate = 1e7f;
+
 // Side of the per-probe visibility map a bake stores by default (docs/probes.md, "Leak-free
 // blending", says why).
 inline constexpr int32_t kDefaultVisibilityResolution = 32;

@@ -332,6 +332,10 @@ TEST(ProbePositions, ParsesAndNamesTheFaultyField) {
             "p.json: positions[0]: expected 3 finite numbers");
   EXPECT_EQ(err(R"({"positions": [[0,0,null]]})"),
             "p.json: positions[0]: expected 3 finite numbers");
+  // ../shared/hostile/probes-bake-embree-abort-positions.json: a probe at 1e20 aborted inside
+  // Embree; it is refused, naming the field.
+  EXPECT_EQ(err(R"({"positions": [[0,0,0],[1e20,1,1]]})"),
+            "p.json: positions[1]: a coordinate beyond 10000000 m");
   EXPECT_EQ(err(R"({"points": []})").rfind("p.json: positions: missing", 0), 0u);
   EXPECT_EQ(err(R"({"positions": 3})"), "p.json: positions: expected an array");
   EXPECT_EQ(err("{"), "p.json: not valid JSON");
@@ -633,6 +637,26 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
   EXPECT_LT(vis, 10.0f * truth) << "truth " << truth << ", plain " << plain;
   EXPECT_GT(vis, truth / 10.0f) << "truth " << truth << ", plain " << plain;
   std::filesystem::remove_all(dir);
+}
+
+// ../shared/hostile: a probe position of 1e20 aborted inside Embree (exit 134). It is bad input
+// now: exit 1, the file and the field named, no output file.
+TEST(ProbesCli, HostileProbePositionIsRefused) {
+  const std::string hostile = test::sharedDir() + "/hostile/probes-bake-embree-abort-positions.json";
+  if (!std::filesystem::exists(hostile)) GTEST_SKIP() << hostile << " not found";
+  const std::string out = ::testing::TempDir() + "kiln_hostile_positions.kprobe";
+  std::filesystem::remove(out);
+  std::string log;
+  EXPECT_EQ(test::runCommand(kiln() + "probes bake " + test::scenesDir() +
+                                 "/two_rooms.gltf --no-scene-probes --positions " + hostile +
+                                 " --out " + out,
+                             &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("probes-bake-embree-abort-positions.json: positions[0]: a coordinate beyond"),
+            std::string::npos)
+      << log;
+  EXPECT_FALSE(std::filesystem::exists(out));
 }
 
 TEST(ProbesCli, BadUsageExitsTwo) {
