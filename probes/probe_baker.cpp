@@ -198,9 +198,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             ProbeBakeReport* report) {
   if (positions.empty()) return Error{"no probe positions"};
   if (settings.rays == 0) return Error{"rays per probe must be > 0"};
-  if (settings.visibilityResolution != 0 &&
-      (settings.visibilityResolution < kMinVisibilityResolution ||
-       settings.visibilityResolution > kMaxVisibilityResolution))
+  if (!isVisibilityResolution(settings.visibilityResolution))
     return Error{"visibility resolution must be 0 or in [" +
                  std::to_string(kMinVisibilityResolution) + ", " +
                  std::to_string(kMaxVisibilityResolution) + "]"};

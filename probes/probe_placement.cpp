@@ -604,8 +604,7 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
   if (settings.candidateRays == 0 || settings.checkPoints == 0)
     return Error{"placement: candidateRays and checkPoints must be positive"};
   const int32_t visibilityResolution = settings.bake.visibilityResolution;
-  if (visibilityResolution != 0 && (visibilityResolution < kMinVisibilityResolution ||
-                                    visibilityResolution > kMaxVisibilityResolution))
+  if (!isVisibilityResolution(visibilityResolution))
     return Error{"placement: bake.visibilityResolution must be 0 or in [" +
                  std::to_string(kMinVisibilityResolution) + ", " +
                  std::to_string(kMaxVisibilityResolution) + "]"};

@@ -34,14 +34,6 @@ std::string list(const std::vector<int32_t>& v) {
   return s;
 }
 
-// Bytes the visibility block adds per probe: maxDistance (f32) and R^2 texels of
-// {mu, sigma, far} as unorm16.
-size_t visibilityBytesPerProbe(int32_t r) {
-  return r > 0
-             ? sizeof(float) + kVisibilityValuesPerTexel * sizeof(uint16_t) * size_t(r) * size_t(r)
-             : 0;
-}
-
 // A two-room scene of docs/scenes.md: room A x in [0, faceA] (the sunlit one), the shared
 // wall x in [faceA, faceB] with its doorway at z 2.8..3.8, room B x in [faceB, faceB + 4].
 struct WallScene {

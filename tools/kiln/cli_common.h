@@ -34,6 +34,10 @@ int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene
                       bool printWarnings = true);
 
 // Subcommand registration.
+// Checks a --visibility-resolution value: 0 (whose meaning `zero` names in the message) or an
+// integer in [kMinVisibilityResolution, kMaxVisibilityResolution].
+CLI::Validator visibilityResolutionValidator(const std::string& zero);
+
 void registerInfoCommand(CLI::App& app);
 void registerBakeCommand(CLI::App& app);  // kiln bake (lightmaps)
 void registerProbesCommand(CLI::App& app);  // kiln probes bake | query | export

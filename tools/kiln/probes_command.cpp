@@ -67,14 +67,6 @@ struct BakeOptions {
   bool quiet = false;
 };
 
-// Bytes the visibility block adds per probe: its maxDistance (f32) and R^2 texels of
-// {mu, sigma, far} as unorm16.
-size_t visibilityBytesPerProbe(int32_t resolution) {
-  return resolution > 0 ? sizeof(float) + kVisibilityValuesPerTexel * sizeof(uint16_t) *
-                                              size_t(resolution) * size_t(resolution)
-                        : 0;
-}
-
 int runBake(const BakeOptions& o) {
   Scene scene;
   if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
@@ -407,20 +399,7 @@ void registerProbesCommand(CLI::App& app) {
                 "Side of each probe's octahedral visibility map for leak-free blending (" +
                     std::to_string(kMinVisibilityResolution) + " to " +
                     std::to_string(kMaxVisibilityResolution) + "; 0 = none: plain blending)")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            int v = -1;
-            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
-            const bool number = r.ec == std::errc() && r.ptr == text.data() + text.size();
-            if (number &&
-                (v == 0 || (v >= kMinVisibilityResolution && v <= kMaxVisibilityResolution)))
-              return "";
-            return "must be 0 (no visibility) or an integer from " +
-                   std::to_string(kMinVisibilityResolution) + " to " +
-                   std::to_string(kMaxVisibilityResolution) + ", got '" + text + "'";
-          },
-          "0 or " + std::to_string(kMinVisibilityResolution) + ".." +
-              std::to_string(kMaxVisibilityResolution)))
+      ->check(visibilityResolutionValidator("no visibility"))
       ->capture_default_str();
   b->add_option("--visibility-max-distance", bake->visibilityMaxDistance,
                 "Metres the visibility depths are clamped to (0 = per probe, the distance to "

@@ -4,7 +4,6 @@
 // corners, each evaluated with and without visibility-weighted blending). Thin over
 // probes/probe_placement.h and probes/octree_placement.h. Usage, algorithm and measurements:
 // docs/probe_placement.md.
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -122,20 +121,7 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
                 "Side of the visibility maps the cheap bakes record, so that sets are scored "
                 "with the visibility-weighted blend (as kiln probes bake; 0 = plain blend, for "
                 "probes baked without visibility)")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            int v = -1;
-            const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
-            const bool number = r.ec == std::errc() && r.ptr == text.data() + text.size();
-            if (number && (v == 0 || (v >= kMinVisibilityResolution &&
-                                      v <= kMaxVisibilityResolution)))
-              return "";
-            return "must be 0 (plain blend) or an integer from " +
-                   std::to_string(kMinVisibilityResolution) + " to " +
-                   std::to_string(kMaxVisibilityResolution) + ", got '" + text + "'";
-          },
-          "0 or " + std::to_string(kMinVisibilityResolution) + ".." +
-              std::to_string(kMaxVisibilityResolution)))
+      ->check(visibilityResolutionValidator("plain blend"))
       ->capture_default_str();
   c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
   c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")

@@ -117,8 +117,7 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   if (gridCells > kMaxGridCells) return fail(name, "gridSize: too many grid cells");
   const uint32_t vr = hd.visibilityResolution;
   if (hd.version < 3 && vr != 0) return fail(name, "reserved: must be 0");
-  if (vr != 0 && (vr < uint32_t(kMinVisibilityResolution) ||
-                  vr > uint32_t(kMaxVisibilityResolution))) {
+  if (!isVisibilityResolution(vr)) {
     return fail(name, "visibilityResolution: " + std::to_string(vr) + " out of range (0, or " +
                           std::to_string(kMinVisibilityResolution) + " to " +
                           std::to_string(kMaxVisibilityResolution) + ")");
@@ -129,7 +128,7 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
   if (hd.version >= 2) {
     expected += kOcclusionLightsBytes + hd.probeCount * kOcclusionBytesPerProbe;
   }
-  if (vr != 0) expected += hd.probeCount * (4 + uint64_t(vr) * vr * kVisibilityValuesPerTexel * 2);
+  expected += hd.probeCount * visibilityBytesPerProbe(vr);
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
                           " bytes but its header counts need " + std::to_string(expected) +
@@ -160,7 +159,7 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
       return fail(name, "visibility: data without a resolution");
     return Status::success();
   }
-  if (v.resolution < kMinVisibilityResolution || v.resolution > kMaxVisibilityResolution) {
+  if (!isVisibilityResolution(v.resolution)) {
     return fail(name, "visibilityResolution: " + std::to_string(v.resolution) +
                           " out of range (0, or " + std::to_string(kMinVisibilityResolution) +
                           " to " + std::to_string(kMaxVisibilityResolution) + ")");

@@ -78,6 +78,11 @@ inline constexpr int kProbeOcclusionChannels = 4;
 // and the largest depth any of the texel's rays reached, all as fractions of maxDistance[i],
 // stored as unorm16 (value / 65535). resolution 0 = no visibility (plain blending).
 inline constexpr size_t kVisibilityValuesPerTexel = 3;
+// Bytes the .kprobe visibility block holds per probe at `resolution`: its maxDistance (f32)
+// and resolution^2 texels of kVisibilityValuesPerTexel unorm16 (0 for no visibility).
+inline constexpr uint64_t visibilityBytesPerProbe(uint64_t resolution) {
+  return resolution > 0 ? 4 + resolution * resolution * kVisibilityValuesPerTexel * 2 : 0;
+}
 struct ProbeVisibility {
   int32_t resolution = 0;
   std::vector<float> maxDistance;  // per probe, metres (> 0)

@@ -43,6 +43,10 @@ namespace kiln {
 // Smallest and largest octahedral map side a file may hold.
 inline constexpr int32_t kMinVisibilityResolution = 4;
 inline constexpr int32_t kMaxVisibilityResolution = 64;
+// A resolution a file, a bake or a command line may give: 0 (no visibility) or in range.
+inline constexpr bool isVisibilityResolution(int64_t r) {
+  return r == 0 || (r >= kMinVisibilityResolution && r <= kMaxVisibilityResolution);
+}
 // v_k never falls below this (far below any v the test gives, about 1e-29 at its smallest):
 // the renormalized blend stays defined and continuous when every probe of the cell is hidden
 // from the point, weighted by how hidden each is (equal floors give the barycentric blend).
