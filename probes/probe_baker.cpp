@@ -145,6 +145,14 @@ glm::vec4 bakeProbeOcclusion(const Integrator& integrator, const LightModePlan& 
   return occlusion;
 }
 
+std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<const vec3> positions,
+                                               const ProbeBakeSettings& settings) {
+  if (settings.visibilityResolution <= 0) return {};
+  if (settings.visibilityMaxDistance > 0.0f)
+    return std::vector<float>(positions.size(), settings.visibilityMaxDistance);
+  return visibilityMaxDistances(positions, scene.bounds);
+}
+
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel,
                       const VisibilityMapSpec& visibility) {
@@ -234,12 +242,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   rep.integrator = integrator.settings();
   const size_t count = positions.size();
   std::vector<ProbeSample> samples(count);
-  std::vector<float> maxDistance;
-  if (settings.visibilityResolution > 0) {
-    maxDistance = settings.visibilityMaxDistance > 0.0f
-                      ? std::vector<float>(count, settings.visibilityMaxDistance)
-                      : visibilityMaxDistances(positions, scene.bounds);
-  }
+  const std::vector<float> maxDistance = probeVisibilityMaxDistances(scene, positions, settings);
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
   std::atomic<uint64_t> rays{0};
   ParallelOptions options;

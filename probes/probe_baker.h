@@ -126,6 +126,12 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             Progress* progress = nullptr, const std::atomic<bool>* cancel = nullptr,
                             ProbeBakeReport* report = nullptr);
 
+// Each probe's visibility maxDistance D for a bake at `positions`: settings.visibilityMaxDistance
+// when > 0, else per probe the distance to the farthest corner of the scene's bounds and the
+// probes (visibilityMaxDistances). Empty when settings.visibilityResolution is 0.
+std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<const vec3> positions,
+                                               const ProbeBakeSettings& settings);
+
 // Radiance SH and validity of one probe at p (the per-probe step of bakeProbes, exposed for
 // tests): `key` keys its random numbers. Thread-safe. When `cancel` becomes true the loop
 // stops early (checked every 4096 rays) and the result is incomplete. With a visibility

@@ -398,9 +398,7 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
     *visibility = ProbeVisibility{};
     if (withVisibility) {
       visibility->resolution = settings.visibilityResolution;
-      visibility->maxDistance = settings.visibilityMaxDistance > 0.0f
-                                    ? std::vector<float>(points.size(), settings.visibilityMaxDistance)
-                                    : visibilityMaxDistances(points, scene.bounds);
+      visibility->maxDistance = probeVisibilityMaxDistances(scene, points, settings);
       visibility->moments.assign(points.size() * visibility->valuesPerProbe(), 0);
     }
   }
