@@ -576,8 +576,10 @@ float cellLeakVolumeError(const Tracer& tracer, const std::array<vec3, 4>& p,
     }
     // Inside geometry (sees no probe) or unaffected (sees all): no leak at this point.
     if (seenWeight <= 0.0f || seenWeight >= 0.999f) continue;
-    // Plain barycentric weights already sum to 1 (the pattern's do).
-    const float scale = maps.resolution > 0 ? 1.0f / runtimeSum : 1.0f;
+    // Plain barycentric weights already sum to 1 (the pattern's do); with maps, the runtime's
+    // rule, including its fade where the probes see the point with little weight.
+    const float scale =
+        maps.resolution > 0 ? visibleWeightScale(runtimeSum, runtimeBlend.minVisibleWeight) : 1.0f;
     ShL2Rgb blend;
     for (size_t v = 0; v < 4; ++v) blend += *sh[v] * (runtime[v] * scale);
     sum += relativeIrradianceError(seen * (1.0f / seenWeight), blend, floor);

@@ -497,7 +497,7 @@ void weightByVisibility(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc,
   const float sum = ((w0 + w1) + w2) + w3;
   // Every v >= kVisibilityFloor > 0 and the barycentric weights sum to 1, so sum > 0.
   if (!(sum > 0.0f)) return;
-  const float inverse = 1.0f / std::max(sum, blend.minVisibleWeight);
+  const float inverse = visibleWeightScale(sum, blend.minVisibleWeight);
   loc.weights = {w0 * inverse, w1 * inverse, w2 * inverse, w3 * inverse};
 }
 

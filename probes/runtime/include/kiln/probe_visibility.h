@@ -76,6 +76,13 @@ struct ProbeBlendSettings {
   float minVisibleWeight = 0.01f;
 };
 
+// The factor that turns the products b_k v_k of a cell's probes into the blend's weights:
+// 1 / max(their sum, minVisibleWeight) (ProbeBlendSettings). weightByVisibility and
+// placement's leak estimate both use it, so that placement scores the blend the runtime gives.
+inline float visibleWeightScale(float sum, float minVisibleWeight) noexcept {
+  return 1.0f / (sum > minVisibleWeight ? sum : minVisibleWeight);
+}
+
 // Octahedral map of unit directions (x, y, z in world axes) to [-1, 1]^2 with +z at the
 // centre and -z at the four corners (Cigolle et al. 2014, "A Survey of Efficient
 // Representations for Independent Unit Vectors"). Texel (i, j) of an R x R map covers
