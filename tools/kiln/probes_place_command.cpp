@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -326,6 +327,14 @@ int runCompare(const CompareOptions& o) {
                                                                  : kDefaultVisibilityResolution;
   ProbeBlendSettings plainBlend;
   plainBlend.visibility = false;
+  // Mean of per-point errors over the points within 0.5 m of a surface.
+  auto nearWallMean = [&](const std::vector<float>& perPoint) {
+    double sum = 0.0;
+    size_t n = 0;
+    for (size_t i = 0; i < points.size(); ++i)
+      if (nearWall[i]) sum += perPoint[i], ++n;
+    return n ? float(sum / double(n)) : 0.0f;
+  };
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds) -> std::optional<Row> {
     Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, &cancelFlag());
@@ -338,12 +347,8 @@ int runCompare(const CompareOptions& o) {
     row.count = positions.size();
     row.error = measureFieldError(*set, points, truth, floor, o.common.threads);
     row.plain = measureFieldError(*set, points, truth, floor, o.common.threads, plainBlend);
-    double sum = 0.0, sumPlain = 0.0;
-    size_t n = 0;
-    for (size_t i = 0; i < points.size(); ++i)
-      if (nearWall[i]) sum += row.error.perPoint[i], sumPlain += row.plain.perPoint[i], ++n;
-    row.nearWall = n ? float(sum / double(n)) : 0.0f;
-    row.nearWallPlain = n ? float(sumPlain / double(n)) : 0.0f;
+    row.nearWall = nearWallMean(row.error.perPoint);
+    row.nearWallPlain = nearWallMean(row.plain.perPoint);
     row.crossing = countCellsCrossingGeometry(tracer, *set);
     row.seconds = seconds;
     return row;
@@ -354,43 +359,39 @@ int runCompare(const CompareOptions& o) {
     Row r;
     r.method = "noise (rebake)";
     r.error = r.plain = noise;
-    double sum = 0.0;
-    size_t n = 0;
-    for (size_t i = 0; i < points.size(); ++i)
-      if (nearWall[i]) sum += noise.perPoint[i], ++n;
-    r.nearWall = r.nearWallPlain = n ? float(sum / double(n)) : 0.0f;
+    r.nearWall = r.nearWallPlain = nearWallMean(noise.perPoint);
     rows.push_back(std::move(r));
   }
-  auto t0 = std::chrono::steady_clock::now();
-  Result<std::vector<vec3>> grid =
-      uniformGridPositions(scene, tracer, volumes, uint32_t(o.count), settings.validity,
-                           o.common.threads);
-  if (!grid) {
-    printError(o.common.scene + ": " + grid.error());
-    return kExitBadInput;
-  }
-  const double gridSeconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::optional<Row> gridRow = evaluate("uniform grid", *grid, gridSeconds);
+  // A baseline at the same count: placed (timed), baked and measured.
+  auto baseline = [&](const std::string& method,
+                      const std::function<Result<std::vector<vec3>>()>& place)
+      -> std::optional<Row> {
+    const auto t0 = std::chrono::steady_clock::now();
+    Result<std::vector<vec3>> positions = place();
+    if (!positions) {
+      printError(o.common.scene + ": " + positions.error());
+      return std::nullopt;
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return evaluate(method, *positions, seconds);
+  };
+  std::optional<Row> gridRow = baseline("uniform grid", [&] {
+    return uniformGridPositions(scene, tracer, volumes, uint32_t(o.count), settings.validity,
+                                o.common.threads);
+  });
   if (!gridRow) return kExitBadInput;
   rows.push_back(*gridRow);
 
-  // Godot-style baseline at the same count: corners of the finest octree cells that touch a
-  // static triangle, the cell size searched for the count.
-  t0 = std::chrono::steady_clock::now();
+  // Godot-style baseline: corners of the finest octree cells that touch a static triangle,
+  // the cell size searched for the count.
   OctreePlacementSettings octree;
   octree.volumes = volumes;
   octree.validity = settings.validity;
   octree.threads = o.common.threads;
-  Result<std::vector<vec3>> corners =
-      octreeCornerPositions(scene, tracer, octree, uint32_t(o.count));
-  if (!corners) {
-    printError(o.common.scene + ": " + corners.error());
-    return kExitBadInput;
-  }
-  const double octreeSeconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::optional<Row> octreeRow = evaluate("octree corners", *corners, octreeSeconds);
+  std::optional<Row> octreeRow = baseline("octree corners", [&] {
+    return octreeCornerPositions(scene, tracer, octree, uint32_t(o.count));
+  });
   if (!octreeRow) return kExitBadInput;
   rows.push_back(*octreeRow);
 
