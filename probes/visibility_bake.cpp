@@ -15,6 +15,12 @@ constexpr int kSums = 11;  // 10 sums and the largest s
 
 uint16_t unorm16(double v) { return uint16_t(std::lround(std::clamp(v, 0.0, 1.0) * 65535.0)); }
 
+double det3(const double m[3][3]) {
+  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
 }  // namespace
 
 VisibilityMapBuilder::VisibilityMapBuilder(const VisibilityMapSpec& spec)
@@ -72,9 +78,7 @@ std::vector<uint16_t> VisibilityMapBuilder::finish(const Tracer& tracer, vec3 pr
       const double n = t[0], ridge = 1e-3 * n;
       const double m[3][3] = {{n, t[1], t[2]}, {t[1], t[3] + ridge, t[4]}, {t[2], t[4], t[5] + ridge}};
       const double rhs[3] = {t[6], t[7], t[8]};
-      const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
-                         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
-                         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+      const double det = det3(m);
       double c[3] = {t[6] / n, 0.0, 0.0};
       if (std::fabs(det) > 1e-12 * n * n * n) {
         // Cramer's rule, column k replaced by the right-hand side.
@@ -82,10 +86,7 @@ std::vector<uint16_t> VisibilityMapBuilder::finish(const Tracer& tracer, vec3 pr
           double a[3][3];
           for (int row = 0; row < 3; ++row)
             for (int col = 0; col < 3; ++col) a[row][col] = col == k ? rhs[row] : m[row][col];
-          c[k] = (a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
-                  a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
-                  a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])) /
-                 det;
+          c[k] = det3(a) / det;
         }
       }
       // Residual sum of squares: sum (s - c0 - c1 x - c2 y)^2 expanded over the sums.
