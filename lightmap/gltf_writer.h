@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "lightmap/lightmap_baker.h"
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

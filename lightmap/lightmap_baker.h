@@ -28,7 +28,7 @@
 #include "src/image.h"
 #include "src/light_modes.h"
 #include "src/progress.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

@@ -12,7 +12,7 @@
 #include <string>
 
 #include "lightmap/lightmap_baker.h"
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

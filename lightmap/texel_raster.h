@@ -17,7 +17,7 @@
 
 #include "lightmap/atlas.h"
 #include "src/parallel.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

@@ -16,7 +16,7 @@
 #include <optional>
 #include <vector>
 
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

@@ -11,7 +11,7 @@
 
 #include <glm/glm.hpp>
 
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln::detail {
 

@@ -15,8 +15,8 @@
 #include "kiln/lppv_volume.h"
 #include "kiln/probe_set.h"
 #include "src/image.h"
-#include "src/result.h"
-#include "src/sh.h"
+#include "kiln/result.h"
+#include "kiln/sh.h"
 #include "src/sh_projection.h"
 
 namespace kiln {

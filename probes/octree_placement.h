@@ -17,7 +17,7 @@
 
 #include "probes/probe_placement.h"
 #include "src/math.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 #include "src/tracer.h"
 

@@ -8,7 +8,7 @@
 // direction, never hit by rays, so they are projected exactly: a light of irradiance E
 // (on a surface facing it, x shadow visibility) from unit direction s has radiance
 // E delta(w - s), whose coefficients are c_i = E Y_i(s).
-// The SH stored is RADIANCE SH (src/sh.h); irradiance for a normal is ShL2Rgb::irradiance(n)
+// The SH stored is RADIANCE SH (kiln/sh.h); irradiance for a normal is ShL2Rgb::irradiance(n)
 // (E itself, not E / pi).
 //
 // Which light goes into the SH follows the scene's lighting mode (src/light_modes.h, Unity's
@@ -33,7 +33,7 @@
 #include "src/integrator.h"
 #include "src/light_modes.h"
 #include "src/progress.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 #include "src/tracer.h"
 

@@ -38,7 +38,7 @@
 #include "probes/probe_baker.h"
 #include "src/math.h"
 #include "src/progress.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 #include "src/tracer.h"
 

@@ -22,7 +22,7 @@
 #include <glm/glm.hpp>
 
 #include "kiln/probe_set.h"
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

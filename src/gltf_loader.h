@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "src/math.h"
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

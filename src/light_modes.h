@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

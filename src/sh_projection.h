@@ -19,7 +19,7 @@
 
 #include "src/image.h"
 #include "src/math.h"
-#include "src/sh.h"
+#include "kiln/sh.h"
 
 namespace kiln {
 

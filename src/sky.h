@@ -10,7 +10,7 @@
 
 #include "src/image.h"
 #include "src/math.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/sampling.h"
 
 namespace kiln {

@@ -8,7 +8,7 @@
 #include <string>
 #include <string_view>
 
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "src/math.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 
 namespace kiln {

@@ -16,7 +16,7 @@
 #include "lightmap/lightmap_writer.h"
 #include "probes/tetrahedralize.h"
 #include "src/gltf_loader.h"
-#include "src/sh.h"
+#include "kiln/sh.h"
 #include "tests/test_util.h"
 #include "tools/render/preview_renderer.h"
 

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "src/image.h"
-#include "src/sh.h"
+#include "kiln/sh.h"
 #include "tests/test_util.h"
 
 namespace kiln {

@@ -19,7 +19,7 @@
 #include <cstdint>
 #include <string>
 
-#include "src/result.h"
+#include "kiln/result.h"
 #include "tools/chart/chart_table.h"
 
 namespace kiln::chart {

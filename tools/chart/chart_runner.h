@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "src/result.h"
+#include "kiln/result.h"
 #include "tools/chart/chart_measure.h"
 
 namespace kiln::chart {

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "src/image.h"
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln {
 

@@ -46,7 +46,7 @@
 #include "src/image.h"
 #include "src/light_modes.h"
 #include "src/math.h"
-#include "src/result.h"
+#include "kiln/result.h"
 #include "src/scene.h"
 #include "src/tracer.h"
 

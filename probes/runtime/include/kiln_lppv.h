@@ -4,7 +4,7 @@
  * codes it uses): an opaque reference-counted handle, verb-object names, a status code from
  * every call. No call throws or aborts.
  *
- * Conventions (see src/sh.h, kiln/lppv_volume.h): positions in glTF world space (metres, +Y
+ * Conventions (see kiln/sh.h, kiln/lppv_volume.h): positions in glTF world space (metres, +Y
  * up). SH arrays are 27 floats, coefficient-major with RGB innermost: sh[3 * i + channel],
  * i = l(l + 1) + m in the real orthonormal basis, holding RADIANCE. Irradiance is E (not
  * E / pi). Outside the volume's outermost samples the value is clamped to the edge.

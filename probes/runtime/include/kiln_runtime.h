@@ -5,7 +5,7 @@
  * Embree's API: an opaque reference-counted handle, verb-object names, a status code from
  * every call plus a message from kiln_last_error(). No call throws or aborts.
  *
- * Conventions (see src/sh.h): positions in glTF world space (metres, +Y up). SH arrays are 27
+ * Conventions (see kiln/sh.h): positions in glTF world space (metres, +Y up). SH arrays are 27
  * floats, coefficient-major with RGB innermost: sh[3 * i + channel], i = l(l + 1) + m in the
  * real orthonormal basis, holding RADIANCE. Irradiance is E (not E / pi).
  *

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "src/result.h"
+#include "kiln/result.h"
 
 namespace kiln::runtime_detail {
 

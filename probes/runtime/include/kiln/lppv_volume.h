@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "kiln/probe_set.h"
-#include "src/result.h"
-#include "src/sh.h"
+#include "kiln/result.h"
+#include "kiln/sh.h"
 
 namespace kiln {
 
@@ -38,7 +38,7 @@ enum class LppvPlacement : uint32_t { kCellCenter = 0, kCellCorner = 1 };
 // many threads is safe.
 //
 // Memory layout: cell (x, y, z) is at index x + nx (y + ny z) (x fastest) in `sh` and
-// `validity`. `sh` holds RADIANCE SH in kiln's basis (src/sh.h: c_i = int L Y_i dw, glTF world
+// `validity`. `sh` holds RADIANCE SH in kiln's basis (kiln/sh.h: c_i = int L Y_i dw, glTF world
 // axes); irradiance is probeIrradiance(sh, n) = E (not E / pi). `validity` is the blend of
 // the probes' validity with the interpolation weights: 1 where every probe the cell draws on
 // is valid, less where some lie inside geometry (a quality mask, not light occlusion).

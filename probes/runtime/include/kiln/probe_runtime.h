@@ -70,7 +70,7 @@ glm::vec4 sampleOcclusion(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
                           const ProbeBlendSettings& blend = {}) noexcept;
 
 // Irradiance E (not E / pi) for unit normal n from radiance SH (Ramamoorthi and Hanrahan
-// 2001; see src/sh.h).
+// 2001; see kiln/sh.h).
 inline glm::vec3 probeIrradiance(const ShL2Rgb& sh, glm::vec3 n) noexcept {
   return sh.irradiance(n);
 }

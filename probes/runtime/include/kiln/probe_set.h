@@ -18,8 +18,8 @@
 #include <glm/glm.hpp>
 
 #include "kiln/probe_visibility.h"
-#include "src/result.h"
-#include "src/sh.h"
+#include "kiln/result.h"
+#include "kiln/sh.h"
 
 namespace kiln {
 
@@ -44,7 +44,7 @@ struct ProbeSeedGrid {
 };
 
 // All runtime probe data. Positions are in glTF world space (metres); `sh` holds RADIANCE
-// SH in kiln's basis (src/sh.h). Plain data: const access from many threads is safe.
+// SH in kiln's basis (kiln/sh.h). Plain data: const access from many threads is safe.
 //
 // Cells by `dimension`:
 //  3: cells [0, innerCellCount) are tetrahedra {p0, p1, p2, p3} with orient3d > 0; cells
