@@ -115,7 +115,7 @@ function(consumer mode)
   set(build ${KILN_WORK_DIR}/consumer-${mode})
   step("consumer (${mode}): configure" ${CMAKE_COMMAND} -S ${consumer_source} -B ${build}
        ${consumer_args} -DKILN_CONSUMER_MODE=${mode} ${ARGN})
-  step("consumer (${mode}): build" ${CMAKE_COMMAND} --build ${build} ${config_args})
+  step("consumer (${mode}): build" ${CMAKE_COMMAND} --build ${build} --parallel 2 ${config_args})
   foreach(program consumer_c consumer_cpp)
     set(exe ${build}/${program})
     if(KILN_CONFIG AND EXISTS ${build}/${KILN_CONFIG}/${program})
@@ -126,6 +126,18 @@ function(consumer mode)
 endfunction()
 
 consumer(package -DCMAKE_PREFIX_PATH=${prefix})
+
+# A project without CXX cannot link kiln::runtime into a C program: the package says why.
+execute_process(COMMAND ${CMAKE_COMMAND} -S ${KILN_SOURCE_DIR}/tests/package/c_only
+                -B ${KILN_WORK_DIR}/c-only -G ${KILN_GENERATOR}
+                -DCMAKE_C_COMPILER=${KILN_C_COMPILER} -DCMAKE_PREFIX_PATH=${prefix}
+                RESULT_VARIABLE result OUTPUT_VARIABLE out ERROR_VARIABLE out TIMEOUT 300)
+string(REGEX REPLACE "[ \n]+" " " out "${out}")
+if(result EQUAL 0 OR NOT out MATCHES "kiln::runtime is a static C\\+\\+ library: enable C\\+\\+")
+  message(FATAL_ERROR "package test: a C-only project should get find_package(kiln)'s "
+    "explanation, got (${result}): ${out}")
+endif()
+message(STATUS "C-only project refused with the explanation: ok")
 
 # --- 3. pkg-config ---------------------------------------------------------------------------
 if(NOT KILN_PKG_CONFIG)
