@@ -79,7 +79,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
 
 // The manifest's atlas part (manifest.h writes it): {"lightmaps": [{"index", "width",
 // "height"}], "objects": [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox,
-// oy]}]}. Objects without a lightmap are listed with lightmapIndex -1.
+// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1.
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene);
 
 // Reads a layout back from a manifest (checked by readManifest, ManifestUse::kAtlas; errors

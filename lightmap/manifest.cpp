@@ -134,6 +134,10 @@ std::optional<std::string> readSettingsFields(const Json& s, ManifestSettingsFie
 
 }  // namespace
 
+vec4 unityLightmapScaleOffset(vec4 so) {
+  return vec4(so.x, so.y, so.z, float(1.0 - double(so.y) - double(so.w)));
+}
+
 Manifest atlasManifest(const AtlasLayout& layout, const Scene& scene) {
   Manifest m;
   for (const AtlasPage& p : layout.pages) m.lightmaps.push_back({p.width, p.height, {}});
@@ -183,11 +187,12 @@ Json manifestJson(const Manifest& m) {
   j["lightmaps"] = manifestPagesJson(m);
   Json objects = Json::array();
   for (const ManifestObject& o : m.objects) {
-    const vec4 so = o.scaleOffset;
+    const vec4 so = o.scaleOffset, uso = unityLightmapScaleOffset(so);
     objects.push_back({{"node", o.node},
                        {"nodeIndex", o.nodeIndex},
                        {"lightmapIndex", o.lightmapIndex},
-                       {"scaleOffset", {so.x, so.y, so.z, so.w}}});
+                       {"scaleOffset", {so.x, so.y, so.z, so.w}},
+                       {"unityScaleOffset", {uso.x, uso.y, uso.z, uso.w}}});
   }
   j["objects"] = std::move(objects);
   j["settings"] = m.settings;

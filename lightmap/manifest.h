@@ -59,6 +59,17 @@ struct ManifestLight {
   std::optional<int> shadowmaskChannel;  // 0..3, or -1: none
 };
 
+// Unity's Renderer.lightmapScaleOffset (unity_LightmapST) for a manifest scaleOffset, in
+// Unity's v-up texture convention: (sx, sy, ox, 1 - sy - oy). Why: glTF texture coordinates
+// have v down from the top-left, Unity's v up from the bottom-left. Unity's glTF importers
+// (glTFast, UnityGLTF) flip v of mesh UVs, uv1_u = (u, 1 - v), and a texture's first image
+// row (the top of the file, glTF v = 0) is Unity's v = 1, so a page point at glTF atlas
+// coordinate a_g is at Unity's a_u = (a_g.x, 1 - a_g.y). With a_g = uv1 * s + o:
+//   1 - a_g.y = 1 - (v sy + oy) = (1 - v) sy + (1 - sy - oy),
+// i.e. a_u = uv1_u * (sx, sy) + (ox, 1 - sy - oy): the scale and ox are unchanged. Computed in
+// double and rounded once to float.
+vec4 unityLightmapScaleOffset(vec4 scaleOffset);
+
 // The settings fields that kiln's readers use, checked by the reader (absent: not given).
 // The writer does not look at these: it writes Manifest::settings as it is.
 struct ManifestSettingsFields {
@@ -99,8 +110,8 @@ Manifest atlasManifest(const AtlasLayout& layout, const Scene& scene);
 
 // The writer: the manifest as JSON, and as the text kiln writes (2-space indent, a final
 // newline). Keys: version, lightmaps [{index, width, height, files}], objects [{node,
-// nodeIndex, lightmapIndex, scaleOffset}], settings, lights, gltf (when set), scene,
-// warnings, stats.
+// nodeIndex, lightmapIndex, scaleOffset, unityScaleOffset}], settings, lights, gltf (when set),
+// scene, warnings, stats.
 nlohmann::json manifestJson(const Manifest& manifest);
 std::string manifestText(const Manifest& manifest);
 // The "lightmaps" array alone (index, width, height, files), as the output glTF repeats it.

@@ -1,7 +1,9 @@
 // manifest_test.cpp: kiln bake's manifest.json (lightmap/manifest.h): the writer and the reader
 // agree (text -> Manifest -> the same text), the reader's errors name the file and the field,
 // hostile sizes and scale/offsets are errors and not crashes (in the library and through
-// `kiln bake --lock-atlas`).
+// `kiln bake --lock-atlas`). Unity interop: the manifest's unityScaleOffset finds the same
+// texels as scaleOffset, and `kiln probes export --unity` evaluates, through Unity's ShadeSH9
+// formula, to the .kprobe's E / pi, in glTF or Unity axes.
 #include "lightmap/manifest.h"
 
 #include <gtest/gtest.h>
@@ -11,10 +13,14 @@
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
+#include "kiln/probe_runtime.h"
+#include "kiln/probe_set.h"
 #include "lightmap/atlas.h"
+#include "src/gltf_loader.h"
 #include "tests/test_util.h"
 
 namespace kiln {
@@ -291,6 +297,220 @@ TEST(ManifestCli, SharedHostileLockAtlasManifest) {
             std::string::npos)
       << out;
   EXPECT_FALSE(fs::exists(dir + "/out/manifest.json"));
+  fs::remove_all(dir);
+}
+
+// ---- Unity interop -------------------------------------------------------------------------
+
+// unityScaleOffset on a real bake (two_rooms, several pages): for random UV1 points of every
+// lightmapped object's UV1 rectangle, glTF's lookup (atlasUV = uv1 * s + o, v down, row 0 at
+// the top) and Unity's (uv1 with v flipped, atlasUV = uv1_u * s_u + o_u, v up, row 0 of the
+// file at v = 1) land on the same point of the page, up to float rounding, so on the same texel.
+TEST(ManifestCli, UnityScaleOffsetFindsTheSameTexels) {
+  const std::string dir = test::makeTempDir("manifest_unity");
+  std::string out;
+  ASSERT_EQ(test::runCommand(kiln() + "bake " + test::scenesDir() +
+                                 "/two_rooms.gltf --preset preview --resolution 8 --samples 1 "
+                                 "--bounces 0 --max-size 128 -q --out " +
+                                 dir,
+                             &out),
+            0)
+      << out;
+  const Json raw = Json::parse(test::readTextFile(dir + "/manifest.json"));
+  Result<Manifest> m = readManifestFile(dir + "/manifest.json", ManifestUse::kLightmaps);
+  ASSERT_TRUE(m.ok()) << m.error();
+  ASSERT_GT(m->lightmaps.size(), 1u);
+  // The output glTF carries every object's UV1 (generated ones included).
+  Result<Scene> scene = loadScene(dir + "/two_rooms.gltf");
+  ASSERT_TRUE(scene.ok()) << scene.error();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  int checked = 0, onEdge = 0;
+  for (size_t i = 0; i < m->objects.size(); ++i) {
+    const ManifestObject& o = m->objects[i];
+    const Json& u = raw["objects"][i]["unityScaleOffset"];
+    ASSERT_EQ(u.size(), 4u);
+    const vec4 unity(u[0].get<float>(), u[1].get<float>(), u[2].get<float>(), u[3].get<float>());
+    // The formula, independently: scale and ox unchanged, oy_u = 1 - sy - oy.
+    EXPECT_EQ(unity.x, o.scaleOffset.x);
+    EXPECT_EQ(unity.y, o.scaleOffset.y);
+    EXPECT_EQ(unity.z, o.scaleOffset.z);
+    EXPECT_NEAR(unity.w, 1.0 - double(o.scaleOffset.y) - o.scaleOffset.w, 1e-7);
+    if (o.lightmapIndex < 0) continue;
+    const Object* object = nullptr;
+    for (const Object& so : scene->objects)
+      if (so.nodeIndex == o.nodeIndex) object = &so;
+    ASSERT_NE(object, nullptr) << o.node;
+    ASSERT_EQ(object->uv1.size(), object->positions.size()) << o.node;
+    const auto [lo, hi] = uv1Bounds(*object);
+    const ManifestPage& page = m->lightmaps[size_t(o.lightmapIndex)];
+    const float w = float(page.width), h = float(page.height);
+    for (int k = 0; k < 200; ++k) {
+      const vec2 uv1(float(lo.x + (hi.x - lo.x) * unit(rng)),
+                     float(lo.y + (hi.y - lo.y) * unit(rng)));
+      // glTF: texel column x, row y counted from the top (the first image row).
+      const vec2 ag =
+          uv1 * vec2(o.scaleOffset.x, o.scaleOffset.y) + vec2(o.scaleOffset.z, o.scaleOffset.w);
+      const vec2 gltfTexel(ag.x * w, ag.y * h);
+      // Unity: the importer's uv1 (v flipped), Unity's lookup, row counted from the bottom.
+      const vec2 uv1Unity(uv1.x, 1.0f - uv1.y);
+      const vec2 au = uv1Unity * vec2(unity.x, unity.y) + vec2(unity.z, unity.w);
+      const vec2 unityTexel(au.x * w, (1.0f - au.y) * h);  // row from the top
+      EXPECT_NEAR(unityTexel.x, gltfTexel.x, 1e-3f) << o.node;
+      EXPECT_NEAR(unityTexel.y, gltfTexel.y, 1e-3f) << o.node;
+      // Inside the page, on the same texel (unless within float rounding of a texel edge).
+      EXPECT_GE(gltfTexel.x, 0.0f);
+      EXPECT_LE(gltfTexel.x, w);
+      EXPECT_GE(gltfTexel.y, 0.0f);
+      EXPECT_LE(gltfTexel.y, h);
+      const auto nearEdge = [](float t) { return std::abs(t - std::round(t)) < 1e-3f; };
+      if (nearEdge(gltfTexel.x) || nearEdge(gltfTexel.y)) {
+        ++onEdge;
+        continue;
+      }
+      EXPECT_EQ(int(std::floor(unityTexel.x)), int(std::floor(gltfTexel.x)));
+      EXPECT_EQ(int(std::floor(unityTexel.y)), int(std::floor(gltfTexel.y)));
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 1000);
+  EXPECT_LT(onEdge, checked / 50);
+  fs::remove_all(dir);
+}
+
+// Unity's ShadeSH9 (UnityCG.cginc: SHEvalLinearL0L1 + SHEvalLinearL2) on the exported
+// constants of one probe, for a unit normal n in the export's axes, in double:
+//   x1.c = dot(SHAc, (n, 1)); vB = n.xyzz * n.yzzx; x2.c = dot(SHBc, vB);
+//   x3 = SHC.rgb * (n.x^2 - n.y^2); result = x1 + x2 + x3.
+glm::dvec3 shadeSh9(const Json& p, glm::dvec3 n) {
+  auto v4 = [&](const char* key) {
+    const Json& a = p.at(key);
+    return glm::dvec4(a[0].get<double>(), a[1].get<double>(), a[2].get<double>(),
+                      a[3].get<double>());
+  };
+  const glm::dvec4 n1(n, 1.0);
+  const glm::dvec3 x1(glm::dot(v4("SHAr"), n1), glm::dot(v4("SHAg"), n1), glm::dot(v4("SHAb"), n1));
+  const glm::dvec4 vB = glm::dvec4(n.x, n.y, n.z, n.z) * glm::dvec4(n.y, n.z, n.z, n.x);
+  const glm::dvec3 x2(glm::dot(v4("SHBr"), vB), glm::dot(v4("SHBg"), vB), glm::dot(v4("SHBb"), vB));
+  const glm::dvec3 x3 = glm::dvec3(v4("SHC")) * (n.x * n.x - n.y * n.y);
+  return x1 + x2 + x3;
+}
+
+// Float rounding bound of one channel of shadeSh9: a few float ulps of the sum of |terms|.
+double shadeSh9Tolerance(const Json& p, int c) {
+  double sum = 0.0;
+  for (const char* key : {"SHAr", "SHAg", "SHAb", "SHBr", "SHBg", "SHBb"})
+    if (key[3] == "rgb"[c])
+      for (int k = 0; k < 4; ++k) sum += std::abs(p.at(key)[size_t(k)].get<double>());
+  sum += std::abs(p.at("SHC")[size_t(c)].get<double>());
+  return 1e-6 * sum + 1e-9;
+}
+
+TEST(ManifestCli, ProbesExportUnityEvaluatesToIrradianceOverPi) {
+  const std::string dir = test::makeTempDir("manifest_probes_unity");
+  // Eight probes in the Cornell box, off its symmetry plane (x = 0.28 is not 0), so that
+  // mirroring x matters.
+  Json positions = {{"positions", Json::array()}};
+  for (int i = 0; i < 8; ++i)
+    positions["positions"].push_back({0.28 + (i & 1 ? 0.07 : -0.07), 0.43 + (i & 2 ? 0.07 : -0.07),
+                                      0.28 + (i & 4 ? 0.09 : -0.05)});
+  test::writeTextFile(dir + "/pos.json", positions.dump());
+  const std::string kprobe = dir + "/box.kprobe";
+  std::string out;
+  ASSERT_EQ(test::runCommand(kiln() + "probes bake " + test::scenesDir() +
+                                 "/cornell_box.gltf --positions " + dir + "/pos.json --out " +
+                                 kprobe + " --rays 256 --visibility-resolution 0 --quiet",
+                             &out),
+            0)
+      << out;
+  Result<ProbeSet> set = loadProbeFile(kprobe);
+  ASSERT_TRUE(set.ok()) << set.error();
+  ASSERT_EQ(set->probeCount(), 8);
+  ASSERT_EQ(test::runCommand(
+                kiln() + "probes export " + kprobe + " --unity --out " + dir + "/unity.json", &out),
+            0)
+      << out;
+  ASSERT_EQ(test::runCommand(kiln() + "probes export " + kprobe + " --unity --axes gltf --out " +
+                                 dir + "/gltf.json",
+                             &out),
+            0)
+      << out;
+  const Json unity = Json::parse(test::readTextFile(dir + "/unity.json"));
+  const Json gltf = Json::parse(test::readTextFile(dir + "/gltf.json"));
+  EXPECT_EQ(unity["axes"], "unity");
+  EXPECT_EQ(gltf["axes"], "gltf");
+  ASSERT_EQ(unity["sh9"].size(), 8u);
+  ASSERT_EQ(gltf["sh9"].size(), 8u);
+
+  // Per probe, many normals: ShadeSH9 of the export = the .kprobe's E(n) / pi; in Unity axes
+  // with the mirrored normal (-x, y, z).
+  std::mt19937 rng(3);
+  std::normal_distribution<double> gauss;
+  for (int i = 0; i < 8; ++i) {
+    const vec3 p = set->positions[size_t(i)];
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(gltf["positions"][i][c].get<float>(), p[c]);
+      EXPECT_EQ(unity["positions"][i][c].get<float>(), c == 0 ? -p.x : p[c]);
+    }
+    for (int k = 0; k < 200; ++k) {
+      glm::dvec3 n(gauss(rng), gauss(rng), gauss(rng));
+      n = glm::normalize(n);
+      const glm::dvec3 expected = glm::dvec3(set->sh[size_t(i)].irradiance(vec3(n))) / double(kPi);
+      const glm::dvec3 inGltf = shadeSh9(gltf["sh9"][i], n);
+      const glm::dvec3 inUnity = shadeSh9(unity["sh9"][i], glm::dvec3(-n.x, n.y, n.z));
+      for (int c = 0; c < 3; ++c) {
+        const double tol = shadeSh9Tolerance(gltf["sh9"][i], c) + 1e-6 * std::abs(expected[c]);
+        EXPECT_NEAR(inGltf[c], expected[c], tol) << "probe " << i << " channel " << c;
+        EXPECT_NEAR(inUnity[c], expected[c], tol) << "probe " << i << " channel " << c;
+      }
+    }
+  }
+
+  // A point between the probes: kiln's query at the glTF point and normal, and Unity's
+  // blend at the mirrored point and normal (barycentric weights of the exported Unity
+  // positions of the query's cell, the exported constants blended with them, ShadeSH9).
+  const glm::dvec3 point(0.3, 0.45, 0.3);
+  for (const glm::dvec3& nRaw : {glm::dvec3(0, 1, 0), glm::dvec3(1, 0, 0), glm::dvec3(-1, -1, 1),
+                                 glm::dvec3(0.3, -0.2, -1)}) {
+    const glm::dvec3 n = glm::normalize(nRaw);
+    char args[160];
+    std::snprintf(args, sizeof args, " %.9g %.9g %.9g %.9g %.9g %.9g", point.x, point.y, point.z,
+                  n.x, n.y, n.z);
+    ASSERT_EQ(
+        test::runCommand(kiln() + "probes query " + kprobe + args + " --json --blend plain", &out),
+        0)
+        << out;
+    const Json q = Json::parse(out);
+    ASSERT_FALSE(q["outer"].get<bool>());
+    glm::dvec3 corner[4];
+    for (int k = 0; k < 4; ++k) {
+      const Json& up = unity["positions"][q["probes"][k].get<int>()];
+      corner[k] = glm::dvec3(up[0].get<double>(), up[1].get<double>(), up[2].get<double>());
+    }
+    // Barycentric coordinates of the Unity point in the Unity tetrahedron.
+    const glm::dvec3 pu(-point.x, point.y, point.z);
+    const glm::dmat3 t(corner[0] - corner[3], corner[1] - corner[3], corner[2] - corner[3]);
+    const glm::dvec3 b3 = glm::inverse(t) * (pu - corner[3]);
+    const double bary[4] = {b3.x, b3.y, b3.z, 1.0 - b3.x - b3.y - b3.z};
+    glm::dvec3 blended(0.0);
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_GE(bary[k], -1e-6);
+      blended +=
+          bary[k] * shadeSh9(unity["sh9"][q["probes"][k].get<int>()], glm::dvec3(-n.x, n.y, n.z));
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double e = q["irradiance"][c].get<double>() / double(kPi);
+      EXPECT_NEAR(blended[c], e, 1e-5 * std::abs(e) + 1e-7)
+          << "normal " << n.x << " " << n.y << " " << n.z << " channel " << c;
+    }
+  }
+
+  // Bad usage: --axes without --unity, --unity with --visibility-moments.
+  EXPECT_EQ(test::runCommand(kiln() + "probes export " + kprobe + " --axes gltf", &out), 2) << out;
+  EXPECT_EQ(
+      test::runCommand(kiln() + "probes export " + kprobe + " --unity --visibility-moments", &out),
+      2)
+      << out;
   fs::remove_all(dir);
 }
 
