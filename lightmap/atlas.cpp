@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "lightmap/manifest.h"
 #include "lightmap/skyline_packer.h"
 
 namespace kiln {
@@ -202,105 +203,63 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
 }
 
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene) {
-  nlohmann::json j;
-  j["lightmaps"] = nlohmann::json::array();
-  for (size_t i = 0; i < layout.pages.size(); ++i)
-    j["lightmaps"].push_back(
-        {{"index", i}, {"width", layout.pages[i].width}, {"height", layout.pages[i].height}});
-  j["objects"] = nlohmann::json::array();
-  for (size_t i = 0; i < layout.objects.size() && i < scene.objects.size(); ++i) {
-    const AtlasObject& o = layout.objects[i];
-    j["objects"].push_back(
-        {{"node", scene.objects[i].name},
-         {"nodeIndex", scene.objects[i].nodeIndex},
-         {"lightmapIndex", o.lightmapIndex},
-         {"scaleOffset", {o.scaleOffset.x, o.scaleOffset.y, o.scaleOffset.z, o.scaleOffset.w}}});
-  }
-  return j;
+  const nlohmann::json manifest = manifestJson(atlasManifest(layout, scene));
+  return {{"lightmaps", manifest["lightmaps"]}, {"objects", manifest["objects"]}};
 }
 
 Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scene& scene) {
   const std::string where = "lock-atlas manifest";
-  if (!manifest.is_object() || !manifest.contains("lightmaps") ||
-      !manifest["lightmaps"].is_array() || !manifest.contains("objects") ||
-      !manifest["objects"].is_array())
-    return Error{where + ": needs arrays \"lightmaps\" and \"objects\""};
-  const nlohmann::json& pages = manifest["lightmaps"];
-  AtlasLayout layout;
-  layout.pages.resize(pages.size());
-  std::vector<bool> seen(pages.size(), false);
-  for (size_t i = 0; i < pages.size(); ++i) {
-    const nlohmann::json& pj = pages[i];
-    const std::string at = where + ": lightmaps[" + std::to_string(i) + "]";
-    if (!pj.is_object() || !pj.contains("index") || !pj["index"].is_number_integer() ||
-        !pj.contains("width") || !pj["width"].is_number_integer() || !pj.contains("height") ||
-        !pj["height"].is_number_integer())
-      return Error{at + ": needs integer \"index\", \"width\" and \"height\""};
-    const int64_t index = pj["index"].get<int64_t>();
-    if (index < 0 || index >= int64_t(pages.size()) || seen[size_t(index)])
-      return Error{at + ": index " + std::to_string(index) + " is out of range or repeated"};
-    seen[size_t(index)] = true;
-    const int64_t w = pj["width"].get<int64_t>(), h = pj["height"].get<int64_t>();
-    if (w < 1 || h < 1 || w > 65536 || h > 65536)
-      return Error{at + ": size " + std::to_string(w) + " x " + std::to_string(h) + " is invalid"};
-    layout.pages[size_t(index)] = AtlasPage{int(w), int(h)};
-  }
+  Result<Manifest> read = readManifest(manifest, where, ManifestUse::kAtlas);
+  if (!read) return Error{read.error()};
+  return atlasFromManifest(*read, scene, where);
+}
 
+Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& scene,
+                                      const std::string& where) {
+  // readManifest checked the manifest by itself (sizes, indices, finite scaleOffset, each
+  // node listed once); what is left is whether it fits `scene`.
+  AtlasLayout layout;
+  for (const ManifestPage& p : manifest.lightmaps) layout.pages.push_back({p.width, p.height});
   std::map<int, uint32_t> byNode;
   for (uint32_t i = 0; i < scene.objects.size(); ++i) byNode[scene.objects[i].nodeIndex] = i;
   layout.objects.resize(scene.objects.size());
-  std::vector<bool> listed(scene.objects.size(), false);
-  const nlohmann::json& objects = manifest["objects"];
-  for (size_t e = 0; e < objects.size(); ++e) {
-    const nlohmann::json& oj = objects[e];
+  for (size_t e = 0; e < manifest.objects.size(); ++e) {
+    const ManifestObject& mo = manifest.objects[e];
     const std::string at = where + ": objects[" + std::to_string(e) + "]";
-    if (!oj.is_object() || !oj.contains("nodeIndex") || !oj["nodeIndex"].is_number_integer() ||
-        !oj.contains("lightmapIndex") || !oj["lightmapIndex"].is_number_integer())
-      return Error{at + ": needs integer \"nodeIndex\" and \"lightmapIndex\""};
-    const int node = oj["nodeIndex"].get<int>();
-    const std::string name =
-        oj.contains("node") && oj["node"].is_string() ? oj["node"].get<std::string>() : "";
-    const auto found = byNode.find(node);
+    const auto found = byNode.find(mo.nodeIndex);
     if (found == byNode.end())
-      return Error{at + ": node '" + name + "' (nodeIndex " + std::to_string(node) +
+      return Error{at + ": node '" + mo.node + "' (nodeIndex " + std::to_string(mo.nodeIndex) +
                    ") has no mesh object in the scene"};
     const uint32_t i = found->second;
     const Object& o = scene.objects[i];
-    if (oj.contains("node") && name != o.name)
-      return Error{at + ": nodeIndex " + std::to_string(node) + " is '" + name +
+    if (mo.node != o.name)
+      return Error{at + ": nodeIndex " + std::to_string(mo.nodeIndex) + " is '" + mo.node +
                    "' in the manifest but '" + o.name + "' in the scene"};
-    if (listed[i]) return Error{at + ": " + describe(o) + " is listed twice"};
-    listed[i] = true;
-    const int page = oj["lightmapIndex"].get<int>();
+    const int page = mo.lightmapIndex;
     if (page < 0) continue;
-    if (page >= int(layout.pages.size()))
-      return Error{at + ": lightmapIndex " + std::to_string(page) + " but the manifest has " +
-                   std::to_string(layout.pages.size()) + " lightmaps"};
     if (!isLightmapped(o))
       return Error{at + ": " + describe(o) +
                    " has a lightmap in the manifest but is not lightmapped in the scene "
                    "(static, scaleInLightmap or receiveGI changed)"};
     if (o.uv1.size() != o.positions.size())
       return Error{at + ": " + describe(o) + " has no lightmap UVs (TEXCOORD_1)"};
-    const nlohmann::json& so = oj.contains("scaleOffset") ? oj["scaleOffset"] : nlohmann::json();
-    if (!so.is_array() || so.size() != 4 ||
-        !std::all_of(so.begin(), so.end(), [](const nlohmann::json& x) { return x.is_number(); }))
-      return Error{at + ": scaleOffset must be 4 numbers"};
     AtlasObject& ao = layout.objects[i];
     ao.lightmapIndex = page;
-    ao.scaleOffset =
-        vec4(so[0].get<float>(), so[1].get<float>(), so[2].get<float>(), so[3].get<float>());
+    ao.scaleOffset = mo.scaleOffset;
     const AtlasPage pg = layout.pages[size_t(page)];
     const auto [lo, hi] = uv1Bounds(o);
     const glm::dvec2 s(ao.scaleOffset.x, ao.scaleOffset.y), off(ao.scaleOffset.z, ao.scaleOffset.w);
     const glm::dvec2 dims(pg.width, pg.height);
     const glm::dvec2 a = (glm::dvec2(lo) * s + off) * dims, b = (glm::dvec2(hi) * s + off) * dims;
-    ao.texelMin = glm::ivec2(glm::round(a));
-    ao.texelSize = glm::ivec2(glm::round(b - a));
-    if (ao.texelMin.x < 0 || ao.texelMin.y < 0 || ao.texelSize.x < 1 || ao.texelSize.y < 1 ||
-        ao.texelMin.x + ao.texelSize.x > pg.width || ao.texelMin.y + ao.texelSize.y > pg.height)
+    // The texel rectangle in double, checked against the page before it becomes integers (a
+    // hostile scaleOffset would overflow int).
+    const glm::dvec2 texelMin = glm::round(a), texelSize = glm::round(b - a);
+    if (!(texelMin.x >= 0.0 && texelMin.y >= 0.0 && texelSize.x >= 1.0 && texelSize.y >= 1.0 &&
+          texelMin.x + texelSize.x <= dims.x && texelMin.y + texelSize.y <= dims.y))
       return Error{at + ": " + describe(o) + ": scaleOffset puts its UV1 rectangle outside " +
                    "lightmap " + std::to_string(page) + " (did its TEXCOORD_1 change?)"};
+    ao.texelMin = glm::ivec2(texelMin);
+    ao.texelSize = glm::ivec2(texelSize);
     const AreaPair ar = areas(o);
     ao.texelsPerUnit = ar.world > 0.0 ? float(s.x * dims.x * std::sqrt(ar.uv / ar.world)) : 0.0f;
   }

@@ -23,6 +23,8 @@
 
 namespace kiln {
 
+struct Manifest;  // lightmap/manifest.h
+
 struct AtlasPage {
   int width = 0, height = 0;  // texels
 };
@@ -75,15 +77,21 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // zero-area uv1).
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);
 
-// The manifest's atlas part: {"lightmaps": [{"index", "width", "height"}], "objects":
-// [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox, oy]}]}. Objects
-// without a lightmap are listed with lightmapIndex -1.
+// The manifest's atlas part (manifest.h writes it): {"lightmaps": [{"index", "width",
+// "height"}], "objects": [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox,
+// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1.
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene);
 
-// Reads a layout back from a manifest (the shape above; other keys are ignored) for `scene`:
-// objects are matched by nodeIndex and their node name must agree; every lightmapped scene
-// object needs an entry with a page, and entries with a page must be lightmapped objects.
-// Texel rectangles are recovered from scaleOffset and the objects' UV1 bounds.
+// Reads a layout back from a manifest (checked by readManifest, ManifestUse::kAtlas; errors
+// start with "lock-atlas manifest") for `scene`. See the overload below.
 Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scene& scene);
+
+// The layout of a manifest that readManifest returned, for `scene`: objects are matched by
+// nodeIndex and their node name must agree; every lightmapped scene object needs an entry
+// with a page, and entries with a page must be lightmapped objects. Texel rectangles are
+// recovered from scaleOffset and the objects' UV1 bounds and must lie inside their page.
+// Errors start with `where` (the manifest's file) and name the object.
+Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& scene,
+                                      const std::string& where);
 
 }  // namespace kiln

@@ -16,6 +16,7 @@
 
 #include "lightmap/gltf_writer.h"
 #include "lightmap/ldr_encoding.h"
+#include "lightmap/manifest.h"
 #include "src/light_modes.h"
 
 namespace kiln {
@@ -147,10 +148,7 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
                  (ec ? ": " + ec.message() : std::string())};
 
   StagedFiles files(dir);
-  Json manifest;
-  manifest["version"] = 1;
-  Json atlas = atlasToJson(result.layout, result.scene);
-  Json lightmaps = atlas["lightmaps"];
+  Manifest manifest = bakeManifest(result, scenePath);
   for (size_t i = 0; i < result.pages.size(); ++i) {
     const LightmapPageResult& page = result.pages[i];
     const int index = int(i);
@@ -161,26 +159,27 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
                    std::to_string(page.light.width) + " x " + std::to_string(page.light.height) +
                    " x " + std::to_string(page.light.channels) + ", its atlas page " +
                    std::to_string(size.width) + " x " + std::to_string(size.height) + " RGB"};
-    Json fileNames;
-    fileNames["light"] = lightmapFileName(index, "light");
-    if (Status s = files.stage(fileNames["light"],
+    ManifestFiles& fileNames = manifest.lightmaps[i].files;
+    fileNames.light = lightmapFileName(index, "light");
+    if (Status s = files.stage(fileNames.light,
                                [&](const std::string& p) { return writeExr(p, page.light); });
         !s)
       return s;
     if (!page.ambientOcclusion.empty()) {
-      fileNames["ao"] = lightmapFileName(index, "ao");
+      fileNames.ao = lightmapFileName(index, "ao");
       if (Status s = files.stage(
-              fileNames["ao"],
+              fileNames.ao,
               [&](const std::string& p) { return writeExr(p, page.ambientOcclusion); });
           !s)
         return s;
     }
     // Directional mode and shadowmask (docs/mixed_lighting.md): RGBA, half floats.
-    for (auto [image, kind] : {std::pair{&page.direction, "direction"},
-                               std::pair{&page.shadowmask, "shadowmask"}}) {
+    for (auto [image, kind, name] :
+         {std::tuple{&page.direction, "direction", &fileNames.direction},
+          std::tuple{&page.shadowmask, "shadowmask", &fileNames.shadowmask}}) {
       if (image->empty()) continue;
-      fileNames[kind] = lightmapFileName(index, kind);
-      if (Status s = files.stage(fileNames[kind],
+      *name = lightmapFileName(index, kind);
+      if (Status s = files.stage(*name,
                                  [&](const std::string& p) { return writeExr(p, *image); });
           !s)
         return s;
@@ -188,41 +187,23 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
     if (output.ldr != LdrEncoding::None) {
       const std::string name =
           "lightmap-" + std::to_string(index) + "_light_" + ldrName(output.ldr) + ".png";
-      fileNames["lightLdr"] = name;
+      fileNames.lightLdr = name;
       const LdrImage ldr =
           output.ldr == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
       if (Status s = files.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldr); });
           !s)
         return s;
     }
-    lightmaps[i]["files"] = fileNames;
   }
-  manifest["lightmaps"] = lightmaps;
-  manifest["objects"] = atlas["objects"];
-  manifest["settings"] = lightmapSettingsJson(settings, output);
-  // Every scene light (docs/mixed_lighting.md): its name and mode as the glTF gives them, what
-  // the lighting mode baked of it, and its shadowmask channel (-1: none).
-  Json lights = Json::array();
-  const LightModePlan& plan = result.lightModes;
-  for (size_t l = 0; l < result.scene.lights.size(); ++l) {
-    const Light& light = result.scene.lights[l];
-    Json e = {{"name", light.name},
-              {"lightIndex", light.lightIndex},
-              {"nodeIndex", light.nodeIndex},
-              {"mode", lightModeName(light.mode)}};
-    if (l < plan.bakeDirect.size()) e["bakedDirect"] = bool(plan.bakeDirect[l]);
-    if (l < plan.bakeIndirect.size()) e["bakedIndirect"] = bool(plan.bakeIndirect[l]);
-    if (l < plan.shadowmaskChannel.size()) e["shadowmaskChannel"] = plan.shadowmaskChannel[l];
-    lights.push_back(e);
-  }
-  manifest["lights"] = lights;
+  manifest.settings = lightmapSettingsJson(settings, output);
   if (output.ldr != LdrEncoding::None)
-    manifest["settings"]["ldrDecode"] =
+    manifest.settings["ldrDecode"] =
         output.ldr == LdrEncoding::Rgbm
             ? "rgb = png.rgb * png.a * " + std::to_string(int(kRgbmRange)) +
                   " (PNG sampled as linear UNORM)"
             : std::string("rgb = 2 * png.rgb (PNG sampled as sRGB, i.e. linearised)");
 
+  const Json lightmaps = manifestPagesJson(manifest);
   std::vector<std::string> warnings = result.warnings;
   if (output.writeGltf) {
     Result<OutputGltf> gltf = buildOutputGltf(scenePath, result, lightmaps, output.outDir);
@@ -242,14 +223,10 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
                                });
         !s)
       return s;
-    manifest["gltf"] = gltf->fileName;
+    manifest.gltf = gltf->fileName;
   }
-  manifest["scene"] = fs::path(scenePath).filename().string();
-  manifest["warnings"] = warnings;
-  manifest["stats"] = {{"texels", result.stats.texels},
-                       {"invalidTexels", result.stats.invalidTexels},
-                       {"rays", result.stats.rays}};  // no times: the files stay deterministic
-  const std::string text = manifest.dump(2) + "\n";
+  manifest.warnings = warnings;
+  const std::string text = manifestText(manifest);
   // The manifest is staged last, so it is renamed last: once it is there, everything it
   // names is too.
   if (Status s = files.stage(kManifestFileName,

@@ -17,6 +17,7 @@
 #include "lightmap/atlas.h"
 #include "lightmap/lightmap_baker.h"
 #include "lightmap/lightmap_writer.h"
+#include "lightmap/manifest.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/progress.h"
 #include "src/text_file.h"
@@ -126,33 +127,30 @@ int applySceneSettings(const Scene& scene, LightmapBakeSettings& b) {
 // manifest (a different resolution would generate different UVs), so the command line may
 // not contradict them. Returns an exit code.
 int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& settings) {
-  Result<Json> read = readJsonFile(o.lockAtlas);
+  Result<Manifest> read = readManifestFile(o.lockAtlas, ManifestUse::kAtlas);
   if (!read) {
     printError("--lock-atlas: " + read.error());
     return kExitBadInput;
   }
-  Json manifest = std::move(read).value();
-  if (manifest.is_object() && manifest.contains("settings") && manifest["settings"].is_object()) {
-    const Json& s = manifest["settings"];
-    auto take = [&](const char* key, const char* option, auto given, auto& field) -> bool {
-      if (!s.contains(key) || !s[key].is_number()) return true;
-      using T = std::decay_t<decltype(field)>;
-      const T locked = s[key].get<T>();
-      if (given && *given != locked) {
-        std::ostringstream msg;
-        msg << option << " " << *given << " contradicts --lock-atlas " << o.lockAtlas << " ("
-            << key << " " << locked << "); leave it out to use the locked atlas";
-        printError(msg.str());
-        return false;
-      }
-      field = locked;
-      return true;
-    };
-    if (!take("resolution", "--resolution", o.resolution, settings.resolution) ||
-        !take("padding", "--padding", o.padding, settings.padding) ||
-        !take("maxSize", "--max-size", o.maxSize, settings.maxSize))
-      return kExitBadUsage;
-  }
+  const Manifest& manifest = *read;
+  const ManifestSettingsFields& s = manifest.settingsFields;
+  auto take = [&](const char* key, const char* option, const auto& given, const auto& locked,
+                  auto& field) -> bool {
+    if (!locked) return true;
+    if (given && *given != *locked) {
+      std::ostringstream msg;
+      msg << option << " " << *given << " contradicts --lock-atlas " << o.lockAtlas << " ("
+          << key << " " << *locked << "); leave it out to use the locked atlas";
+      printError(msg.str());
+      return false;
+    }
+    field = *locked;
+    return true;
+  };
+  if (!take("resolution", "--resolution", o.resolution, s.resolution, settings.resolution) ||
+      !take("padding", "--padding", o.padding, s.padding, settings.padding) ||
+      !take("maxSize", "--max-size", o.maxSize, s.maxSize, settings.maxSize))
+    return kExitBadUsage;
   // The manifest's texel rectangles are recovered from the objects' UV1 bounds, so objects
   // whose UVs kiln generates need them generated first, exactly as the bake will.
   // Same unwrap settings as bakeLightmaps (lightmap_baker.cpp: gutter = max(1, padding)).
@@ -165,9 +163,9 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
     printError(scene.path + ": " + uvs.error());
     return kExitBadInput;
   }
-  Result<AtlasLayout> layout = atlasFromManifest(manifest, unwrapped);
+  Result<AtlasLayout> layout = atlasFromManifest(manifest, unwrapped, o.lockAtlas);
   if (!layout) {
-    printError(o.lockAtlas + ": " + layout.error());
+    printError("--lock-atlas: " + layout.error());
     return kExitBadInput;
   }
   settings.lockedAtlas = std::move(layout).value();

@@ -18,6 +18,7 @@
 #include "kiln/probe_set.h"
 #include "probes/probe_baker.h"
 #include "src/progress.h"
+#include "src/sh_projection.h"
 #include "src/text_file.h"
 #include "src/tracer.h"
 #include "tools/kiln/cli_common.h"
@@ -268,6 +269,8 @@ struct ExportOptions {
   std::string out;
   bool json = false;
   bool moments = false;
+  bool unity = false;
+  std::string axes = "unity";  // with --unity: "unity" or "gltf"
 };
 
 Json exportJson(const ProbeSet& s, bool withMoments) {
@@ -331,13 +334,64 @@ Json exportJson(const ProbeSet& s, bool withMoments) {
   return j;
 }
 
+// `export --unity`: per probe Unity's SH9 shader constants (packUnitySh9, src/sh_projection.h),
+// the 7 float4 that UnityCG.cginc's ShadeSH9 reads as unity_SHAr .. unity_SHC, with the probe
+// positions, in Unity's world axes (a glTF point or direction (x, y, z) is Unity's (-x, y, z),
+// as glTFast and UnityGLTF import it) or, with --axes gltf, in kiln's own.
+Json exportUnityJson(const ProbeSet& s, ShAxes axes) {
+  const bool unity = axes == ShAxes::kUnity;
+  Json j;
+  j["format"] = "kiln unity sh9";
+  j["version"] = 1;
+  j["axes"] = unity ? "unity" : "gltf";
+  j["axesConvention"] =
+      unity ? "Unity world axes (left-handed, +Y up, +Z forward): a glTF point or direction "
+              "(x, y, z) is Unity's (-x, y, z), the X negation of glTFast and UnityGLTF"
+            : "glTF world axes (right-handed, +Y up), as in the .kprobe file";
+  j["shConvention"] =
+      "per probe the 7 float4 shader constants of Unity's SH9 lighting (unity_SHAr, unity_SHAg, "
+      "unity_SHAb, unity_SHBr, unity_SHBg, unity_SHBb, unity_SHC; UnityCG.cginc ShadeSH9): for "
+      "a unit world-space normal n, x1.c = dot(SHAc, (n, 1)), x2.c = dot(SHBc, n.xyzz * n.yzzx), "
+      "x3 = SHC.rgb * (n.x^2 - n.y^2), and x1 + x2 + x3 = E(n) / pi, the outgoing radiance of a "
+      "white Lambertian surface (linear colour; E in lux)";
+  j["probeCount"] = s.probeCount();
+  const float sx = unity ? -1.0f : 1.0f;
+  Json positions = Json::array(), sh9 = Json::array();
+  for (int32_t i = 0; i < s.probeCount(); ++i) {
+    const vec3 p = s.positions[i];
+    positions.push_back(vecJson(vec3(sx * p.x, p.y, p.z)));
+    const UnitySh9 u = packUnitySh9(s.sh[i], axes);
+    sh9.push_back({{"SHAr", vec4Json(u.shAr)},
+                   {"SHAg", vec4Json(u.shAg)},
+                   {"SHAb", vec4Json(u.shAb)},
+                   {"SHBr", vec4Json(u.shBr)},
+                   {"SHBg", vec4Json(u.shBg)},
+                   {"SHBb", vec4Json(u.shBb)},
+                   {"SHC", vec4Json(u.shC)}});
+  }
+  j["positions"] = std::move(positions);
+  j["sh9"] = std::move(sh9);
+  return j;
+}
+
 int runExport(const ExportOptions& o) {
   Result<ProbeSet> set = loadProbeFile(o.file);
   if (!set) {
     printError(set.error());
     return kExitBadInput;
   }
-  const std::string text = exportJson(*set, o.moments).dump(2) + "\n";
+  if (!o.unity && o.axes != "unity") {
+    printError("probes export: --axes applies to --unity only");
+    return kExitBadUsage;
+  }
+  if (o.unity && o.moments) {
+    printError("probes export: --visibility-moments and --unity do not go together");
+    return kExitBadUsage;
+  }
+  const Json json = o.unity
+                        ? exportUnityJson(*set, o.axes == "gltf" ? ShAxes::kGltf : ShAxes::kUnity)
+                        : exportJson(*set, o.moments);
+  const std::string text = json.dump(2) + "\n";
   if (o.out.empty()) {
     std::cout << text;
     return kExitOk;
@@ -436,13 +490,22 @@ void registerProbesCommand(CLI::App& app) {
   q->callback(commandCallback([query]() { return runQuery(*query); }));
 
   auto exp = std::make_shared<ExportOptions>();
-  CLI::App* e = probes->add_subcommand("export", "Print a .kprobe file as JSON, for people");
+  CLI::App* e = probes->add_subcommand(
+      "export", "Print a .kprobe file as JSON, for people or (--unity) for Unity's SH9 shading");
   e->add_option("file", exp->file, ".kprobe file")->required();
   e->add_flag("--json", exp->json, "JSON output (the only format; accepted for clarity)");
   e->add_option("--out,-o", exp->out, "Write to this file instead of stdout");
   e->add_flag("--visibility-moments", exp->moments,
               "Also list every probe's visibility map (visibilityMoments: per probe R^2 "
               "texels of [mu, sigma, far]; large)");
+  e->add_flag("--unity", exp->unity,
+              "Instead: per probe Unity's SH9 shader constants (SHAr SHAg SHAb SHBr SHBg SHBb "
+              "SHC, evaluating to E/pi as ShadeSH9 does) and positions");
+  e->add_option("--axes", exp->axes,
+                "With --unity: the axes of positions and SH: unity (a glTF (x, y, z) is Unity's "
+                "(-x, y, z), as glTFast and UnityGLTF import) or gltf")
+      ->check(CLI::IsMember({"unity", "gltf"}))
+      ->capture_default_str();
   e->callback(commandCallback([exp]() { return runExport(*exp); }));
 
   registerProbesLppvCommand(*probes);

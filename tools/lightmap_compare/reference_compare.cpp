@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "lightmap/manifest.h"
 #include "src/image.h"
 #include "src/text_file.h"
 
@@ -68,18 +69,14 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
   Result<Json> index = readJsonFile(indexPath);
   if (!index) return Error{index.error()};
   const std::string manifestPath = (outDir / "manifest.json").string();
-  Result<Json> manifest = readJsonFile(manifestPath);
+  // kiln's one manifest reader (lightmap/manifest.h) checks it: pages, files, scaleOffset.
+  Result<Manifest> manifest = readManifestFile(manifestPath, ManifestUse::kLightmaps);
   if (!manifest) return Error{manifest.error()};
   if (!index->contains("objects") || !(*index)["objects"].is_array())
     return Error{indexPath + ": needs an \"objects\" array"};
-  if (!manifest->contains("objects") || !(*manifest)["objects"].is_array() ||
-      !manifest->contains("lightmaps") || !(*manifest)["lightmaps"].is_array())
-    return Error{manifestPath + ": needs \"objects\" and \"lightmaps\" arrays"};
 
-  std::map<int, const Json*> bakedObjects;
-  for (const Json& o : (*manifest)["objects"])
-    if (o.contains("nodeIndex") && o["nodeIndex"].is_number_integer())
-      bakedObjects[o["nodeIndex"].get<int>()] = &o;
+  std::map<int, const ManifestObject*> bakedObjects;
+  for (const ManifestObject& o : manifest->objects) bakedObjects[o.nodeIndex] = &o;
   std::map<int, Image> pages;  // loaded on first use
 
   ReferenceComparison comparison;
@@ -94,22 +91,15 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
     const std::string who = "node " + std::to_string(result.nodeIndex) + " '" + result.node + "'";
     auto it = bakedObjects.find(result.nodeIndex);
     if (it == bakedObjects.end()) return Error{manifestPath + ": no object for " + who};
-    const Json& baked = *it->second;
-    if (baked.value("node", std::string()) != result.node)
-      return Error{manifestPath + ": " + who + " is called '" + baked.value("node", std::string()) +
-                   "' in the manifest"};
-    const int page = baked.value("lightmapIndex", -1);
-    if (page < 0 || size_t(page) >= (*manifest)["lightmaps"].size())
-      return Error{manifestPath + ": " + who + " has no lightmap"};
-    const Json& so = baked["scaleOffset"];
-    if (!so.is_array() || so.size() != 4) return Error{manifestPath + ": " + who + ": bad scaleOffset"};
-    const vec2 scale(so[0].get<float>(), so[1].get<float>()), offset(so[2].get<float>(), so[3].get<float>());
+    const ManifestObject& baked = *it->second;
+    if (baked.node != result.node)
+      return Error{manifestPath + ": " + who + " is called '" + baked.node + "' in the manifest"};
+    const int page = baked.lightmapIndex;
+    if (page < 0) return Error{manifestPath + ": " + who + " has no lightmap"};
+    const vec2 scale(baked.scaleOffset.x, baked.scaleOffset.y),
+        offset(baked.scaleOffset.z, baked.scaleOffset.w);
     if (!pages.count(page)) {
-      const Json& lm = (*manifest)["lightmaps"][size_t(page)];
-      std::string file;
-      if (lm.contains("files") && lm["files"].contains("light"))
-        file = lm["files"]["light"].get<std::string>();
-      if (file.empty()) return Error{manifestPath + ": lightmaps[" + std::to_string(page) + "] has no light file"};
+      const std::string& file = manifest->lightmaps[size_t(page)].files.light;
       Result<Image> img = readHdrImage((outDir / file).string());
       if (!img) return Error{img.error()};
       pages[page] = std::move(img).value();

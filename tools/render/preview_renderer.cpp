@@ -17,6 +17,7 @@
 #include "kiln/lppv_volume.h"
 #include "kiln/probe_runtime.h"
 #include "lightmap/directional.h"
+#include "lightmap/manifest.h"
 #include "lightmap/seams.h"
 #include "probes/lppv.h"
 #include "src/integrator.h"
@@ -143,85 +144,40 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
   const std::string manifestPath = (fs::path(dir) / "manifest.json").string();
   if (!fs::exists(manifestPath, ec))
     return Error{manifestPath + ": missing (--lightmaps takes the --out directory of kiln bake)"};
-  Result<Json> parsed = readJsonFile(manifestPath);
-  if (!parsed) return Error{parsed.error()};
-  const Json& m = *parsed;
+  // The manifest by itself (sizes, indices, finite scaleOffset, files.light, settings) is
+  // checked by its reader; what is left is whether it fits `scene` and its images.
+  Result<Manifest> read = readManifestFile(manifestPath, ManifestUse::kLightmaps);
+  if (!read) return Error{read.error()};
+  const Manifest& m = *read;
   const std::string& mp = manifestPath;
-  if (!m.is_object()) return Error{mp + ": expected a JSON object"};
-  if (!m.contains("version") || !m["version"].is_number_integer() || m["version"].get<int>() != 1)
-    return Error{mp + ": version: expected 1"};
-  if (!m.contains("lightmaps") || !m["lightmaps"].is_array())
-    return Error{mp + ": lightmaps: expected an array"};
-  if (!m.contains("objects") || !m["objects"].is_array())
-    return Error{mp + ": objects: expected an array"};
 
   LightmapSet set;
-  // Settings first: the lighting mode decides how the lights are read.
-  if (m.contains("settings") && m["settings"].is_object()) {
-    const Json& s = m["settings"];
-    if (s.contains("lightingMode")) {
-      if (!s["lightingMode"].is_string())
-        return Error{mp + ": settings.lightingMode: expected a string"};
-      Result<LightingMode> mode = parseLightingMode(s["lightingMode"].get<std::string>());
-      if (!mode) return Error{mp + ": settings.lightingMode: " + mode.error()};
-      set.lightingMode = *mode;
-    }
-    if (s.contains("shadowColor") && !readVec3(s["shadowColor"], set.shadowColor))
-      return Error{mp + ": settings.shadowColor: expected 3 finite numbers"};
-    if (s.contains("bounces")) {
-      if (!s["bounces"].is_number_integer() || s["bounces"].get<int64_t>() < 0 ||
-          s["bounces"].get<int64_t>() > 1 << 20)
-        return Error{mp + ": settings.bounces: expected an integer >= 0"};
-      set.bounces = s["bounces"].get<int>();
-    }
-    if (s.contains("albedoBoost") &&
-        (!readFinite(s["albedoBoost"], set.albedoBoost) || !(set.albedoBoost > 0.0f)))
-      return Error{mp + ": settings.albedoBoost: expected a number > 0"};
-    if (s.contains("indirectIntensity") &&
-        (!readFinite(s["indirectIntensity"], set.indirectIntensity) ||
-         set.indirectIntensity < 0.0f))
-      return Error{mp + ": settings.indirectIntensity: expected a number >= 0"};
-  }
+  const ManifestSettingsFields& s = m.settingsFields;
+  if (s.lightingMode) set.lightingMode = *s.lightingMode;
+  if (s.shadowColor) set.shadowColor = *s.shadowColor;
+  if (s.bounces) set.bounces = *s.bounces;
+  if (s.albedoBoost) set.albedoBoost = *s.albedoBoost;
+  if (s.indirectIntensity) set.indirectIntensity = *s.indirectIntensity;
 
   // Pages.
-  const Json& pages = m["lightmaps"];
-  set.pages.resize(pages.size());
-  std::vector<bool> seen(pages.size(), false);
-  for (size_t i = 0; i < pages.size(); ++i) {
+  set.pages.resize(m.lightmaps.size());
+  for (size_t i = 0; i < m.lightmaps.size(); ++i) {
     const std::string element = mp + ": lightmaps[" + std::to_string(i) + "]";
-    const Json& p = pages[i];
-    if (!p.is_object()) return Error{element + ": expected an object"};
-    if (!p.contains("index") || !p["index"].is_number_integer() || p["index"].get<int64_t>() < 0 ||
-        p["index"].get<int64_t>() >= int64_t(pages.size()) || seen[p["index"].get<size_t>()])
-      return Error{element + ".index: expected a unique integer in [0, " +
-                   std::to_string(pages.size()) + ")"};
-    const size_t index = p["index"].get<size_t>();
-    seen[index] = true;
-    int width = 0, height = 0;
-    for (auto [key, value] : {std::pair{"width", &width}, std::pair{"height", &height}}) {
-      if (!p.contains(key) || !p[key].is_number_integer() || p[key].get<int64_t>() < 1 ||
-          p[key].get<int64_t>() > 1 << 16)
-        return Error{element + "." + key + ": expected an integer >= 1"};
-      *value = p[key].get<int>();
-    }
-    if (!p.contains("files") || !p["files"].is_object() || !p["files"].contains("light") ||
-        !p["files"]["light"].is_string())
-      return Error{element + ".files.light: expected a file name"};
-    PreviewLightmapPage& page = set.pages[index];
-    for (auto [kind, image] : {std::pair{"light", &page.light},
-                               std::pair{"direction", &page.direction},
-                               std::pair{"shadowmask", &page.shadowmask}}) {
-      if (!p["files"].contains(kind)) continue;
-      if (!p["files"][kind].is_string())
-        return Error{element + ".files." + kind + ": expected a file name"};
-      const std::string file = (fs::path(dir) / p["files"][kind].get<std::string>()).string();
+    const ManifestPage& p = m.lightmaps[i];
+    PreviewLightmapPage& page = set.pages[i];
+    for (auto [kind, name, image] :
+         {std::tuple{"light", &p.files.light, &page.light},
+          std::tuple{"direction", &p.files.direction, &page.direction},
+          std::tuple{"shadowmask", &p.files.shadowmask, &page.shadowmask}}) {
+      if (name->empty()) continue;
+      const std::string file = (fs::path(dir) / *name).string();
       Result<Image> loaded = readHdrImage(file);
       if (!loaded) return Error{element + ".files." + kind + ": " + loaded.error()};
-      if (loaded->width != width || loaded->height != height)
+      if (loaded->width != p.width || loaded->height != p.height)
         return Error{element + ".files." + kind + ": " + file + " is " +
                      std::to_string(loaded->width) + " x " + std::to_string(loaded->height) +
-                     ", the manifest says " + std::to_string(width) + " x " +
-                     std::to_string(height)};
+                     ", the manifest says " + std::to_string(p.width) + " x " +
+                     std::to_string(p.height)};
       *image = std::move(loaded).value();
     }
   }
@@ -231,42 +187,25 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
   for (size_t o = 0; o < scene.objects.size(); ++o) objectOfNode[scene.objects[o].nodeIndex] = o;
   set.objects.assign(scene.objects.size(), PreviewLightmapObject{});
   std::vector<bool> listed(scene.objects.size(), false);
-  const Json& objects = m["objects"];
-  for (size_t i = 0; i < objects.size(); ++i) {
+  for (size_t i = 0; i < m.objects.size(); ++i) {
     const std::string element = mp + ": objects[" + std::to_string(i) + "]";
-    const Json& e = objects[i];
-    if (!e.is_object()) return Error{element + ": expected an object"};
-    if (!e.contains("nodeIndex") || !e["nodeIndex"].is_number_integer())
-      return Error{element + ".nodeIndex: expected an integer"};
-    const int64_t node = e["nodeIndex"].get<int64_t>();
-    auto it = objectOfNode.find(int(node));
-    if (node < 0 || node > INT32_MAX || it == objectOfNode.end())
-      return Error{element + ".nodeIndex: " + std::to_string(node) + " is not a mesh node of " +
-                   scene.path + " (was the manifest baked from another scene?)"};
+    const ManifestObject& e = m.objects[i];
+    auto it = objectOfNode.find(e.nodeIndex);
+    if (it == objectOfNode.end())
+      return Error{element + ".nodeIndex: " + std::to_string(e.nodeIndex) +
+                   " is not a mesh node of " + scene.path +
+                   " (was the manifest baked from another scene?)"};
     const size_t o = it->second;
     const Object& object = scene.objects[o];
-    if (!e.contains("node") || !e["node"].is_string())
-      return Error{element + ".node: expected the node's name"};
-    if (e["node"].get<std::string>() != object.name)
-      return Error{element + ".node: " + quoted(e["node"].get<std::string>()) + " but node " +
-                   std::to_string(node) + " of " + scene.path + " is " + quoted(object.name) +
-                   " (was the manifest baked from another scene?)"};
-    if (listed[o]) return Error{element + ": node " + std::to_string(node) + " listed twice"};
+    if (e.node != object.name)
+      return Error{element + ".node: " + quoted(e.node) + " but node " +
+                   std::to_string(e.nodeIndex) + " of " + scene.path + " is " +
+                   quoted(object.name) + " (was the manifest baked from another scene?)"};
     listed[o] = true;
-    if (!e.contains("lightmapIndex") || !e["lightmapIndex"].is_number_integer() ||
-        e["lightmapIndex"].get<int64_t>() < -1 ||
-        e["lightmapIndex"].get<int64_t>() >= int64_t(set.pages.size()))
-      return Error{element + ".lightmapIndex: expected -1 or a page index below " +
-                   std::to_string(set.pages.size())};
     PreviewLightmapObject& entry = set.objects[o];
-    entry.lightmapIndex = e["lightmapIndex"].get<int>();
+    entry.lightmapIndex = e.lightmapIndex;
     if (entry.lightmapIndex < 0) continue;
-    if (!e.contains("scaleOffset") || !e["scaleOffset"].is_array() ||
-        e["scaleOffset"].size() != 4)
-      return Error{element + ".scaleOffset: expected 4 finite numbers [sx, sy, ox, oy]"};
-    for (int k = 0; k < 4; ++k)
-      if (!readFinite(e["scaleOffset"][size_t(k)], entry.scaleOffset[k]))
-        return Error{element + ".scaleOffset: expected 4 finite numbers [sx, sy, ox, oy]"};
+    entry.scaleOffset = e.scaleOffset;
     if (object.uv1.empty())
       return Error{element + ": node " + quoted(object.name) + " has a lightmap but no " +
                    "TEXCOORD_1 in " + scene.path + ": kiln generated its lightmap UVs, so " +
@@ -285,33 +224,20 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
   for (size_t l = 0; l < scene.lights.size(); ++l)
     set.lights[l] = {bool(plan.bakeDirect[l]), bool(plan.bakeIndirect[l]),
                      plan.shadowmaskChannel[l]};
-  if (m.contains("lights")) {
-    const Json& lights = m["lights"];
-    if (!lights.is_array() || lights.size() != scene.lights.size())
+  if (m.lights) {
+    if (m.lights->size() != scene.lights.size())
       return Error{mp + ": lights: expected one entry per light of " + scene.path + " (" +
                    std::to_string(scene.lights.size()) + ")"};
-    for (size_t l = 0; l < lights.size(); ++l) {
-      const std::string element = mp + ": lights[" + std::to_string(l) + "]";
-      const Json& e = lights[l];
-      if (!e.is_object()) return Error{element + ": expected an object"};
-      if (e.contains("light") &&
-          (!e["light"].is_string() || e["light"].get<std::string>() != scene.lights[l].name))
-        return Error{element + ".light: expected " + quoted(scene.lights[l].name) + " (light " +
-                     std::to_string(l) + " of " + scene.path + ")"};
+    for (size_t l = 0; l < m.lights->size(); ++l) {
+      const ManifestLight& e = (*m.lights)[l];
+      if (!e.name.empty() && e.name != scene.lights[l].name)
+        return Error{mp + ": lights[" + std::to_string(l) + "].name: " + quoted(e.name) +
+                     " but light " + std::to_string(l) + " of " + scene.path + " is " +
+                     quoted(scene.lights[l].name)};
       PreviewLightBake& bake = set.lights[l];
-      for (auto [key, field] : {std::pair{"bakedDirect", &bake.bakedDirect},
-                                std::pair{"bakedIndirect", &bake.bakedIndirect}}) {
-        if (!e.contains(key)) continue;
-        if (!e[key].is_boolean()) return Error{element + "." + key + ": expected true or false"};
-        *field = e[key].get<bool>();
-      }
-      if (e.contains("shadowmaskChannel")) {
-        if (!e["shadowmaskChannel"].is_number_integer() ||
-            e["shadowmaskChannel"].get<int64_t>() < -1 ||
-            e["shadowmaskChannel"].get<int64_t>() >= kShadowmaskChannels)
-          return Error{element + ".shadowmaskChannel: expected -1..3"};
-        bake.shadowmaskChannel = e["shadowmaskChannel"].get<int>();
-      }
+      if (e.bakedDirect) bake.bakedDirect = *e.bakedDirect;
+      if (e.bakedIndirect) bake.bakedIndirect = *e.bakedIndirect;
+      if (e.shadowmaskChannel) bake.shadowmaskChannel = *e.shadowmaskChannel;
     }
   }
   bool needsMask = false;

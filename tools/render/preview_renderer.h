@@ -110,10 +110,11 @@ struct LightmapSet {
   float indirectIntensity = 1.0f;
 };
 
-// Reads DIR/manifest.json and the EXR pages it lists, and checks them against `scene`: every
-// manifest object must name a mesh node of the scene (nodeIndex and node name agree) and
-// every mesh node must be listed, lightmapIndex must name a page, scaleOffset must be 4
-// finite numbers, a lightmapped object must have UV1, images must have the manifest's size.
+// Reads DIR/manifest.json (through readManifestFile, lightmap/manifest.h, which checks it by
+// itself: lightmapIndex names a page, scaleOffset is 4 finite numbers, ...) and the EXR pages
+// it lists, and checks them against `scene`: every manifest object must name a mesh node of
+// the scene (nodeIndex and node name agree) and every mesh node must be listed, a lightmapped
+// object must have UV1, images must have the manifest's size, lights match the scene's.
 // Errors name the file and the field ("out/manifest.json: objects[3].node: ...").
 Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene);
 
