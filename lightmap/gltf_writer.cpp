@@ -928,7 +928,8 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
     for (size_t b = 0; b < doc["buffers"].size(); ++b) {
       const Json& buffer = doc["buffers"][b];
       const size_t length = buffer.is_object() && buffer.contains("byteLength") &&
-                                    buffer["byteLength"].is_number_unsigned()
+                                    buffer["byteLength"].is_number_integer() &&
+                                    buffer["byteLength"].get<int64_t>() > 0
                                 ? buffer["byteLength"].get<size_t>()
                                 : 0;
       const std::vector<unsigned char>& data =
@@ -942,12 +943,13 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
       chunk.insert(chunk.end(), data.begin(), data.begin() + long(length));
     }
     for (Json& view : doc["bufferViews"]) {
-      if (!view.is_object() || !view.contains("buffer") || !view["buffer"].is_number_unsigned())
+      // (kiln's own views hold signed integers, the parsed ones unsigned: both are integers)
+      if (!view.is_object() || !view.contains("buffer") || !view["buffer"].is_number_integer())
         continue;
-      const size_t b = view["buffer"].get<size_t>();
-      if (b >= base.size()) continue;  // the loader rejects it; leave it as it was
+      const int64_t b = view["buffer"].get<int64_t>();
+      if (b < 0 || size_t(b) >= base.size()) continue;  // the loader rejects it; left as it was
       view["buffer"] = 0;
-      view["byteOffset"] = base[b] + view.value("byteOffset", size_t(0));
+      view["byteOffset"] = base[size_t(b)] + view.value("byteOffset", size_t(0));
     }
     for (size_t i = 0; i < doc["images"].size(); ++i) {
       Json& image = doc["images"][i];

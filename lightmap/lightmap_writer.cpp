@@ -309,6 +309,9 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
                                                  failed);
                                    if (failed)
                                      return Error{"cannot copy " + source + ": " + failed.message()};
+                                   // A read-only input makes a read-only copy otherwise.
+                                   fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write,
+                                                   fs::perm_options::add, failed);
                                    return Status::success();
                                  });
           !s)

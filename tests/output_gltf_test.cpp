@@ -302,16 +302,28 @@ TEST(OutputGltf, AtlasUvWritesTheTransformIntoTexcoord1) {
   for (const std::string& path : {writeInstancedCornell(dir), writeGeneratedUvScene(dir)}) {
     const Scene scene = load(path);
     const LightmapBakeResult r = constantResult(scene);
-    LightmapOutputSettings plain, atlas;
+    LightmapOutputSettings plain, atlas, glb;
     plain.outDir = dir + "/plain";
     atlas.outDir = dir + "/atlas";
     atlas.atlasUv = true;
+    glb = atlas;
+    glb.outDir = dir + "/glb";
+    glb.glb = true;
     ASSERT_TRUE(writeLightmapOutputs(path, r, LightmapBakeSettings{}, plain).ok());
     ASSERT_TRUE(writeLightmapOutputs(path, r, LightmapBakeSettings{}, atlas).ok());
+    ASSERT_TRUE(writeLightmapOutputs(path, r, LightmapBakeSettings{}, glb).ok());
     const std::string name = fs::path(path).stem().string() + ".gltf";
     const Json m = readJson(plain.outDir + "/manifest.json");
     const Json g = readJson(atlas.outDir + "/" + name);
     const Scene a = load(plain.outDir + "/" + name), b = load(atlas.outDir + "/" + name);
+    // The same as one .glb (its new vertex data merged into the BIN chunk).
+    const Scene c = load(glb.outDir + "/" + fs::path(path).stem().string() + ".glb");
+    ASSERT_EQ(c.objects.size(), scene.objects.size());
+    for (size_t i = 0; i < scene.objects.size(); ++i) {
+      EXPECT_EQ(c.objects[i].positions, b.objects[i].positions);
+      EXPECT_EQ(c.objects[i].uv1, b.objects[i].uv1);
+      EXPECT_EQ(c.objects[i].triangles, b.objects[i].triangles);
+    }
     ASSERT_EQ(a.objects.size(), scene.objects.size());
     ASSERT_EQ(b.objects.size(), scene.objects.size());
     std::set<int> meshes;
