@@ -564,6 +564,20 @@ class ResourcePlacer {
   std::map<fs::path, bool> inPlace_;
 };
 
+// True when a material (or anything in it: extensions' texture infos too) has a texture info
+// with "texCoord": 1.
+bool readsTexcoord1(const Json& j) {
+  if (j.is_object()) {
+    if (j.contains("index") && j.contains("texCoord") && j["texCoord"] == 1) return true;
+    for (const auto& [key, value] : j.items())
+      if (key != "extras" && readsTexcoord1(value)) return true;
+  } else if (j.is_array()) {
+    for (const Json& v : j)
+      if (readsTexcoord1(v)) return true;
+  }
+  return false;
+}
+
 // extras.kiln of a JSON element, created when absent. Returns nullptr when extras or
 // extras.kiln exist but are not objects (left alone).
 Json* kilnExtras(Json& element) {
@@ -721,6 +735,7 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
       if (m >= 0 && size_t(m) < meshUsers.size()) ++meshUsers[size_t(m)];
     }
   bool lightmapUsed = false;
+  std::set<int> warnedMaterials;  // --atlas-uv and a material that reads TEXCOORD_1
 
   for (size_t i = 0; i < result.scene.objects.size(); ++i) {
     const Object& o = result.scene.objects[i];
@@ -790,6 +805,15 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
       for (size_t j = 0; j < mesh.primitives.size() && primitives; ++j) {
         auto uv = mesh.primitives[j].attributes.find("TEXCOORD_1");
         if (uv == mesh.primitives[j].attributes.end()) continue;
+        const int material = mesh.primitives[j].material;
+        if (material >= 0 && size_t(material) < model.materials.size() &&
+            doc.contains("materials") && doc["materials"].is_array() &&
+            size_t(material) < doc["materials"].size() &&
+            readsTexcoord1(doc["materials"][size_t(material)]) &&
+            warnedMaterials.insert(material).second)
+          out.warnings.push_back(scenePath + ": materials[" + std::to_string(material) +
+                                 "] samples a texture with TEXCOORD_1, which --atlas-uv turns "
+                                 "into atlas UVs");
         std::optional<AccessorView> v = viewAccessor(model, uv->second);
         if (!v || v->components != 2) {
           primitives.reset();

@@ -271,6 +271,11 @@ std::string writeInstancedCornell(const std::string& dir) {
   twin["translation"] = {0, -3, 0};
   g["nodes"].push_back(twin);
   g["scenes"][0]["nodes"].push_back(g["nodes"].size() - 1);
+  // Material 0 reads an occlusion texture with TEXCOORD_1: --atlas-uv warns about it.
+  g["images"] = {{{"uri", "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAIAAACQd1PeAAAA"
+                          "DElEQVR4nGP438AAAAQBAYDFKhhdAAAAAElFTkSuQmCC"}}};
+  g["textures"] = {{{"source", 0}}};
+  g["materials"][0]["occlusionTexture"] = {{"index", 0}, {"texCoord", 1}};
   test::writeTextFile(dir + "/cornell_twin.gltf", g.dump());
   fs::copy_file(test::scenesDir() + "/cornell_box.bin", dir + "/cornell_box.bin");
   return dir + "/cornell_twin.gltf";
@@ -314,6 +319,16 @@ TEST(OutputGltf, AtlasUvWritesTheTransformIntoTexcoord1) {
     ASSERT_TRUE(writeLightmapOutputs(path, r, LightmapBakeSettings{}, glb).ok());
     const std::string name = fs::path(path).stem().string() + ".gltf";
     const Json m = readJson(plain.outDir + "/manifest.json");
+    const bool texcoord1 = readJson(path).contains("images");
+    auto warnsAboutTexcoord1 = [](const Json& manifest) {
+      for (const Json& w : manifest["warnings"])
+        if (w.get<std::string>().find("materials[0] samples a texture with TEXCOORD_1") !=
+            std::string::npos)
+          return true;
+      return false;
+    };
+    EXPECT_FALSE(warnsAboutTexcoord1(m));
+    EXPECT_EQ(warnsAboutTexcoord1(readJson(atlas.outDir + "/manifest.json")), texcoord1);
     const Json g = readJson(atlas.outDir + "/" + name);
     const Scene a = load(plain.outDir + "/" + name), b = load(atlas.outDir + "/" + name);
     // The same as one .glb (its new vertex data merged into the BIN chunk).
@@ -346,6 +361,42 @@ TEST(OutputGltf, AtlasUvWritesTheTransformIntoTexcoord1) {
     }
     EXPECT_EQ(meshes.size(), scene.objects.size()) << path;
   }
+}
+
+// A .glb input (kiln's own .glb of the Cornell box) baked again: as a .gltf its binary chunk
+// becomes "<scene>.bin" beside it; as a .glb into its own folder it is refused.
+TEST(OutputGltf, GlbInput) {
+  const std::string dir = test::makeTempDir("output_gltf");
+  const Scene scene = load(cornellBox());
+  LightmapOutputSettings first;
+  first.outDir = dir + "/a";
+  first.glb = true;
+  ASSERT_TRUE(writeLightmapOutputs(cornellBox(), constantResult(scene), LightmapBakeSettings{},
+                                   first)
+                  .ok());
+  const std::string glbPath = dir + "/a/cornell_box.glb";
+  const Scene fromGlb = load(glbPath);
+  LightmapOutputSettings second;
+  second.outDir = dir + "/b";
+  ASSERT_TRUE(writeLightmapOutputs(glbPath, constantResult(fromGlb), LightmapBakeSettings{},
+                                   second)
+                  .ok());
+  const Json g = readJson(dir + "/b/cornell_box.gltf");
+  EXPECT_EQ(g["buffers"][0]["uri"], "cornell_box.bin");
+  EXPECT_TRUE(fs::exists(dir + "/b/cornell_box.bin"));
+  const Scene again = load(dir + "/b/cornell_box.gltf");
+  ASSERT_EQ(again.objects.size(), scene.objects.size());
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    EXPECT_EQ(again.objects[i].positions, scene.objects[i].positions);
+    EXPECT_EQ(again.objects[i].uv1, scene.objects[i].uv1);
+  }
+  const std::vector<uint8_t> before = readFile(glbPath);
+  LightmapOutputSettings third = first;  // --glb into the input's folder
+  const Status s = writeLightmapOutputs(glbPath, constantResult(fromGlb), LightmapBakeSettings{},
+                                        third);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("overwrite"), std::string::npos) << s.error();
+  EXPECT_EQ(readFile(glbPath), before);
 }
 
 // Every URI of a glTF resolves to a file inside `dir` (data: URIs aside).
