@@ -736,6 +736,34 @@ TEST(BakeCommand, ShadowmaskDirectionalEndToEnd) {
   fs::remove_all(dir);
 }
 
+// One light instanced by four nodes that, with the sun, overlap in Shadowmask mode: the last
+// instance gets no channel and is baked fully, so it gets a copy of the light marked baked
+// while the other instances' light stays realtime.
+TEST(BakeCommand, LightInstancesBakedDifferentlyGetLightsOfTheirOwn) {
+  const std::string dir = test::makeTempDir("bake_mixed");
+  const std::string scene = writeMixedScene(dir, "shadowmask");
+  Json doc = readJson(scene);
+  for (size_t n = 3; n <= 6; ++n) doc["nodes"][n]["extensions"]["KHR_lights_punctual"]["light"] = 1;
+  test::writeTextFile(scene, doc.dump());
+  std::string out;
+  ASSERT_EQ(kiln("bake " + scene + " --out " + dir +
+                     "/out --resolution 4 --samples 1 --bounces 0 --ldr rgbm -q",
+                 &out),
+            0)
+      << out;
+  expectBakedLightMarks(dir + "/out", "mixed.gltf");  // each instance's light as baked
+  const Json g = readJson(dir + "/out/mixed.gltf"), m = readJson(dir + "/out/manifest.json");
+  const Json& lights = g["extensions"]["KHR_lights_punctual"]["lights"];
+  ASSERT_EQ(lights.size(), 8u);  // the seven and one copy of lampA
+  EXPECT_EQ(lights[7]["name"], "lampA");
+  EXPECT_EQ(lights[7]["extras"]["kiln"]["baked"], true);
+  EXPECT_EQ(lights[1]["extras"]["kiln"]["baked"], false);
+  int baked = 0;
+  for (const Json& l : m["lights"]) baked += l["name"] == "lampA" && l["bakedDirect"] == true;
+  EXPECT_EQ(baked, 1);
+  fs::remove_all(dir);
+}
+
 // The scene's extras.kiln.lightingMode applies when the command line gives none: Subtractive
 // bakes every non-realtime light fully, writes no shadowmask and records the default shadow
 // colour.
