@@ -27,11 +27,11 @@
 //     rectangles) and sets lightMap and lightMapIntensity = intensity;
 //   - with the default option `kilnShading`, shades the lightmap the way `kiln render` does:
 //     outgoing radiance = emission + base colour x E / pi (docs/render.md), whatever metallic
-//     and roughness say. Without it three.js would take (1 - metalness) x base colour and
-//     take the share of its 4% dielectric specular lobe off the diffuse without adding any
-//     specular back (a lightmap has no direction), so a rough dielectric would come out about
-//     5% darker than kiln render and a metal black. rgbm pages are decoded (rgb x a x 8) in
-//     the same shader patch, which rgbm always needs;
+//     and roughness say. three.js's own rule takes (1 - metalness) x base colour and takes
+//     the share of its 4% dielectric specular lobe off the diffuse without adding specular
+//     back (a lightmap has no direction): a rough dielectric comes out 1-2% darker than
+//     kiln render (docs/threejs.md) and a metal black. rgbm pages are decoded (rgb x a x
+//     range) in the same shader patch, which rgbm needs in any case;
 //   - with `tintedTransparency` (default), lets the light behind an alphaMode BLEND material
 //     of uniform colour through tinted by its base colour, as kiln's bake and kiln render
 //     do (alpha x surface + (1 - alpha) x base colour x behind): blending with a constant
