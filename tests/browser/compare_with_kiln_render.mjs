@@ -16,7 +16,7 @@
 // Exit: 0 pass, 1 fail, 77 skipped (no Chromium, or tools/web's npm packages missing; not
 // under CI=true, where that fails).
 import { spawnSync } from 'node:child_process';
-import { existsSync, mkdirSync, readFileSync } from 'node:fs';
+import { cpSync, existsSync, mkdirSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join, relative } from 'node:path';
 import {
   compareImages, fileExists, importThree, requireWebPackage, outputOf, parseArgs, readJson, readPng,
@@ -112,10 +112,12 @@ for (const job of jobs)
     process.exit(1);
   }
 
+mkdirSync(args.out, { recursive: true });
 const server = createStaticServer({
   '/': webDir,
   '/three/': join(webDir, 'node_modules', 'three'),
   '/data/': args.bakes,
+  '/out/': args.out,
 });
 const port = await listenLocal(server);
 const browser = await puppeteer.launch({
@@ -235,6 +237,46 @@ try {
                 `${linear.meanB.toFixed(5)}, mean |diff| ${linear.meanAbs.toFixed(5)} = ` +
                 `${(100 * linear.relative).toFixed(3)}% of kiln render's mean (limit ${100 * TOLERANCE}%)`);
     console.log(`     images: ${join(out, 'compare.png')} (kiln render | three.js | |diff| x 4)`);
+  }
+
+  // Bad input: a copy of the Cornell box output whose node 0 has an unknown encoding and
+  // node 1 a texture index out of range must load, with one warning per broken node that
+  // names the node and the field, and those two nodes without a lightmap.
+  const badDir = join(args.out, 'bad_input');
+  rmSync(badDir, { recursive: true, force: true });
+  cpSync(bakeDir(args.bakes, scenes[0]), badDir, { recursive: true });
+  const badFile = join(badDir, scenes[0].scene);
+  const bad = readJson(badFile);
+  const lightmappedNodes = bad.nodes.map((n, i) => (n.extensions && n.extensions.MX_lightmap ? i : -1)).filter((i) => i >= 0);
+  if (lightmappedNodes.length < 2) {
+    console.error(`FAILED: bad input: ${badFile} has fewer than 2 nodes with MX_lightmap`);
+    failures++;
+  } else {
+    const [a, b] = lightmappedNodes;
+    const extA = bad.nodes[a].extensions.MX_lightmap;
+    extA.extras = { ...(extA.extras || {}), kiln: { ...((extA.extras || {}).kiln || {}), encoding: 'hdr' } };
+    bad.nodes[b].extensions.MX_lightmap.lightMapTexture.index = 99;
+    writeFileSync(badFile, JSON.stringify(bad));
+    const page = await browser.newPage();
+    const messages = [];
+    page.on('console', (m) => messages.push(`${m.type()}: ${m.text()}`));
+    page.on('pageerror', (e) => messages.push(`pageerror: ${e.message}`));
+    await page.goto(`http://127.0.0.1:${port}/viewer.html?static=1&size=64,64&gltf=/out/bad_input/${scenes[0].scene}`);
+    const info = await page.evaluate(() => window.kilnViewer.then((v) => v.info, (e) => 'rejected: ' + e.message));
+    await page.close();
+    const expected = expectedCounts(badFile);  // counts nodes that still have the extension
+    const primitives = (n) => bad.meshes[bad.nodes[n].mesh].primitives.length;
+    const wantMeshes = expected.meshes - primitives(a) - primitives(b);
+    const warnings = messages.filter((m) => m.startsWith('warn'));
+    const nameA = `nodes[${a}] ("${bad.nodes[a].name}").extensions.MX_lightmap.extras.kiln.encoding: "hdr" is not dldr or rgbm`;
+    const nameB = `nodes[${b}] ("${bad.nodes[b].name}").extensions.MX_lightmap.lightMapTexture.index: expected a texture index below`;
+    const ok = typeof info === 'object' && info.lightmappedMeshes === wantMeshes && warnings.length === 2 &&
+               warnings.some((w) => w.includes(nameA)) && warnings.some((w) => w.includes(nameB)) &&
+               messages.length === warnings.length;
+    if (!ok) failures++;
+    console.log(`${ok ? 'ok  ' : 'FAIL'} bad input (node ${a} unknown encoding, node ${b} texture 99): ` +
+                `${typeof info === 'object' ? info.lightmappedMeshes : info} lightmapped meshes ` +
+                `(expected ${wantMeshes}); page messages:\n       ${messages.join('\n       ')}`);
   }
 } finally {
   await browser.close();
