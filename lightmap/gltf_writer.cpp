@@ -14,11 +14,15 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 #include <map>
+#include <numbers>
+#include <set>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "lightmap/atlas.h"
+#include "lightmap/ldr_encoding.h"
 #include "src/gltf_loader.h"
+#include "src/light_modes.h"
 
 namespace kiln {
 namespace {
@@ -60,7 +64,14 @@ Result<Json> readDocumentJson(const std::string& path, bool* glb) {
 
 bool skipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int,
                const unsigned char*, int, void*) {
-  return true;  // images are referenced, never decoded or rewritten
+  return true;  // images are referenced or copied, never decoded or rewritten
+}
+
+// For a .glb output: keeps every image's encoded bytes, to embed them as they are.
+bool keepEncodedImage(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                      const unsigned char* bytes, int size, void*) {
+  image->image.assign(bytes, bytes + std::max(size, 0));
+  return true;
 }
 
 // Raw access to a non-sparse accessor's elements.
@@ -217,6 +228,12 @@ std::optional<SourceMap> traceSources(const tinygltf::Model& m, const tinygltf::
   return map;
 }
 
+// uv x (sx, sy) + (ox, oy): the atlas UV (identity (1, 1, 0, 0) leaves uv as it is).
+vec2 applyUvTransform(vec2 uv, vec4 so) {
+  return vec2(uv.x * so.x + so.z, uv.y * so.y + so.w);
+}
+const vec4 kIdentityUv(1.0f, 1.0f, 0.0f, 0.0f);
+
 // Appends accessors (one bufferView each) to the document and their bytes to a new buffer.
 class BinaryBuilder {
  public:
@@ -326,7 +343,7 @@ int gatherAccessor(BinaryBuilder& bin, const AccessorView& v, const std::vector<
 // The new primitives of a node whose UVs kiln generated, from the original attributes.
 std::optional<Json> rebuildFromSources(const tinygltf::Model& m, const Json& meshJson,
                                        const tinygltf::Mesh& mesh, const SourceMap& src,
-                                       const UnwrapResult& unwrap, bool flip,
+                                       const UnwrapResult& unwrap, bool flip, vec4 uvTransform,
                                        BinaryBuilder& bin) {
   Json primitives = Json::array();
   size_t triangle = 0;
@@ -353,8 +370,9 @@ std::optional<Json> rebuildFromSources(const tinygltf::Model& m, const Json& mes
       const SourceVertex s = src.vertices[unwrap.vertexRemap[newVertices[i]]];
       if (s.primitive != j) return std::nullopt;  // a vertex shared across primitives
       sourceIndex[i] = s.index;
-      uv1.push_back(unwrap.uv1[newVertices[i]].x);
-      uv1.push_back(unwrap.uv1[newVertices[i]].y);
+      const vec2 uv = applyUvTransform(unwrap.uv1[newVertices[i]], uvTransform);
+      uv1.push_back(uv.x);
+      uv1.push_back(uv.y);
     }
     Json p = meshJson["primitives"][j];
     p.erase("targets");
@@ -393,7 +411,7 @@ std::optional<Json> rebuildFromSources(const tinygltf::Model& m, const Json& mes
 // accessors): the baked Object taken back to the node's local space (positions, normals,
 // TEXCOORD_0, TEXCOORD_1), one primitive per material.
 Json rebuildFromObject(const Object& o, const glm::dmat4& world, size_t gltfMaterials,
-                       BinaryBuilder& bin) {
+                       vec4 uvTransform, BinaryBuilder& bin) {
   const glm::dmat4 localFromWorld = glm::inverse(world);
   const glm::dmat3 normalToLocal = glm::transpose(glm::dmat3(world));
   const bool flip = glm::determinant(glm::dmat3(world)) < 0.0;
@@ -423,7 +441,8 @@ Json rebuildFromObject(const Object& o, const glm::dmat4& world, size_t gltfMate
       pos.insert(pos.end(), {float(p.x), float(p.y), float(p.z)});
       nrm.insert(nrm.end(), {float(n.x), float(n.y), float(n.z)});
       if (!o.uv0.empty()) uv0.insert(uv0.end(), {o.uv0[v].x, o.uv0[v].y});
-      uv1.insert(uv1.end(), {o.uv1[v].x, o.uv1[v].y});
+      const vec2 uv = applyUvTransform(o.uv1[v], uvTransform);
+      uv1.insert(uv1.end(), {uv.x, uv.y});
     }
     Json p = {{"mode", TINYGLTF_MODE_TRIANGLES}};
     Json attributes;
@@ -455,6 +474,96 @@ std::string encodeUriPath(const std::string& path) {
   return out;
 }
 
+std::string percentDecode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) &&
+        std::isxdigit(uint8_t(s[i + 2]))) {
+      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  return out;
+}
+
+std::string lowerCase(std::string s) {
+  for (char& c : s) c = char(std::tolower(uint8_t(c)));
+  return s;
+}
+
+// An embedded image's mimeType: the data: URI's, else the JSON's, else from the bytes'
+// signature (PNG, JPEG, WebP, KTX2); empty when unknown.
+std::string imageMimeType(const std::string& uri, const Json& image,
+                          const std::vector<unsigned char>& bytes) {
+  if (uri.rfind("data:", 0) == 0) {
+    const size_t end = uri.find_first_of(";,", 5);
+    if (end != std::string::npos && end > 5) return uri.substr(5, end - 5);
+  }
+  if (image.contains("mimeType") && image["mimeType"].is_string())
+    return image["mimeType"].get<std::string>();
+  auto startsWith = [&](const char* sig, size_t n, size_t at = 0) {
+    return bytes.size() >= at + n && std::memcmp(bytes.data() + at, sig, n) == 0;
+  };
+  if (startsWith("\x89PNG", 4)) return "image/png";
+  if (startsWith("\xFF\xD8\xFF", 3)) return "image/jpeg";
+  if (startsWith("RIFF", 4) && startsWith("WEBP", 4, 8)) return "image/webp";
+  if (startsWith("\xABKTX 20\xBB", 8)) return "image/ktx2";
+  return {};
+}
+
+// Names of the files copied into the output directory: a relative path inside the input's
+// folder is kept, anything else (../, absolute) goes by its file name; a name already taken
+// (by a file kiln writes, by another source, or an input file of the document that is not
+// this source) gets "_2", "_3", ... before its extension. Compared case-insensitively, for
+// case-insensitive file systems.
+class ResourcePlacer {
+ public:
+  ResourcePlacer(fs::path outputDir, const std::vector<std::string>& reserved,
+                 std::set<fs::path> sources)
+      : outputDir_(std::move(outputDir)), sources_(std::move(sources)) {
+    for (const std::string& name : reserved) taken_[lowerCase(name)] = fs::path();
+  }
+
+  // The output name of `source` (canonical), referenced as the relative path `wanted`.
+  // *inPlace: the source is already that file of the output directory.
+  std::string place(const fs::path& source, const fs::path& wanted, bool* inPlace) {
+    if (auto it = bySource_.find(source); it != bySource_.end()) {
+      *inPlace = inPlace_[source];
+      return it->second;
+    }
+    fs::path rel = wanted.lexically_normal();
+    if (rel.is_absolute() || rel.empty() || *rel.begin() == ".." || !rel.has_filename())
+      rel = wanted.filename();
+    const std::string stem = rel.stem().string(), ext = rel.extension().string();
+    std::string name = rel.generic_string();
+    for (int n = 2;; ++n) {
+      const fs::path dest = outputDir_ / name;
+      std::error_code ec;
+      const fs::path canonical = fs::weakly_canonical(dest, ec);
+      const bool self = !ec && canonical == source;
+      const bool otherInput = !ec && !self && sources_.count(canonical);
+      auto taken = taken_.find(lowerCase(name));
+      if (!otherInput && (taken == taken_.end() || taken->second == source)) {
+        taken_[lowerCase(name)] = source;
+        bySource_[source] = name;
+        inPlace_[source] = self;
+        *inPlace = self;
+        return name;
+      }
+      name = (rel.parent_path() / (stem + "_" + std::to_string(n) + ext)).generic_string();
+    }
+  }
+
+ private:
+  fs::path outputDir_;
+  std::set<fs::path> sources_;  // every input file of the document, canonical
+  std::map<std::string, fs::path> taken_;
+  std::map<fs::path, std::string> bySource_;
+  std::map<fs::path, bool> inPlace_;
+};
+
 // extras.kiln of a JSON element, created when absent. Returns nullptr when extras or
 // extras.kiln exist but are not objects (left alone).
 Json* kilnExtras(Json& element) {
@@ -468,8 +577,17 @@ Json* kilnExtras(Json& element) {
 
 }  // namespace
 
+double lightmapIntensity(LdrEncoding encoding) {
+  return encoding == LdrEncoding::Rgbm ? std::numbers::pi : 2.0 * std::numbers::pi;
+}
+
 Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapBakeResult& result,
-                                   const Json& lightmaps, const std::string& outDir) {
+                                   const Json& lightmaps, const OutputGltfOptions& options) {
+  if (options.ldr == LdrEncoding::None)
+    return Error{"the output glTF needs the LDR pages (its lightmap textures)"};
+  if (options.ldrPages.size() != result.layout.pages.size() ||
+      (options.glb && options.ldrPngs.size() != result.layout.pages.size()))
+    return Error{"the output glTF needs one LDR page per lightmap page"};
   bool glb = false;
   Result<Json> parsed = readDocumentJson(scenePath, &glb);
   if (!parsed) return Error{parsed.error()};
@@ -478,7 +596,7 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
   tinygltf::Model model;
   {
     tinygltf::TinyGLTF loader;
-    loader.SetImageLoader(skipImage, nullptr);
+    loader.SetImageLoader(options.glb ? keepEncodedImage : skipImage, nullptr);
     std::string err, warn;
     const bool ok = glb ? loader.LoadBinaryFromFile(&model, &err, &warn, scenePath)
                         : loader.LoadASCIIFromFile(&model, &err, &warn, scenePath);
@@ -488,45 +606,73 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
   OutputGltf out;
   const fs::path input(scenePath);
   const std::string stem = input.stem().string();
-  out.fileName = stem + ".gltf";
+  out.fileName = stem + (options.glb ? ".glb" : ".gltf");
   std::error_code ec;
   const fs::path inputDir = fs::weakly_canonical(fs::absolute(input).parent_path(), ec);
-  const fs::path outputDir = fs::weakly_canonical(fs::absolute(fs::path(outDir)), ec);
-  if (fs::weakly_canonical(fs::absolute(input), ec) == outputDir / out.fileName)
+  const fs::path outputDir = fs::weakly_canonical(fs::absolute(fs::path(options.outDir)), ec);
+  const fs::path inputFile = fs::weakly_canonical(fs::absolute(input), ec);
+  if (inputFile == outputDir / out.fileName)
     return Error{scenePath + ": the output glTF " + (outputDir / out.fileName).string() +
                  " would overwrite the input scene; choose another output directory"};
+  const std::string glbChunkName = stem + ".bin", uvBufferName = stem + "_lightmap_uv.bin";
 
-  // Buffers and images stay where they are: relative URIs get the path from the output
-  // directory to the input's; a .glb's binary chunk becomes a file.
-  fs::path relative = fs::relative(inputDir, outputDir, ec);
-  std::string prefix;
-  if (ec || relative.empty()) {
-    prefix = encodeUriPath(inputDir.generic_string()) + "/";
-  } else if (relative != ".") {
-    prefix = encodeUriPath(relative.generic_string()) + "/";
-  }
-  auto rewrite = [&](Json& element) {
+  // Self-contained output: every file the document references is copied into the output
+  // directory (a .glb output embeds them later); data: URIs stay.
+  if (!doc.contains("buffers") || !doc["buffers"].is_array()) doc["buffers"] = Json::array();
+  if (!doc.contains("images") || !doc["images"].is_array()) doc["images"] = Json::array();
+  struct FileRef {
+    Json* element;
+    std::string where;
+    fs::path source;   // canonical
+    fs::path wanted;   // the URI, decoded
+  };
+  std::vector<FileRef> refs;
+  auto collect = [&](Json& element, const std::string& where) {
     if (!element.is_object() || !element.contains("uri") || !element["uri"].is_string()) return;
     const std::string uri = element["uri"].get<std::string>();
-    if (uri.rfind("data:", 0) == 0 || uri.find("://") != std::string::npos) return;
-    if (!uri.empty() && uri[0] == '/') return;  // absolute
-    element["uri"] = prefix + uri;
+    if (uri.rfind("data:", 0) == 0) return;
+    if (uri.find("://") != std::string::npos) {
+      out.warnings.push_back(scenePath + ": " + where + ": '" + uri +
+                             "' is not a file; the output references it as it is");
+      return;
+    }
+    const fs::path decoded = fs::path(percentDecode(uri));
+    std::error_code e;
+    const fs::path source = fs::weakly_canonical(inputDir / decoded, e);
+    if (e || !fs::is_regular_file(source, e)) {
+      out.warnings.push_back(scenePath + ": " + where + ": file '" + uri +
+                             "' not found; its URI is kept as it was");
+      return;
+    }
+    refs.push_back({&element, where, source, decoded});
   };
-  if (doc.contains("buffers") && doc["buffers"].is_array()) {
-    for (size_t i = 0; i < doc["buffers"].size(); ++i) {
-      Json& b = doc["buffers"][i];
-      if (glb && i == 0 && b.is_object() && !b.contains("uri") && !model.buffers.empty()) {
-        const std::string name = stem + ".bin";
-        out.binaries.push_back({name, std::vector<uint8_t>(model.buffers[0].data.begin(),
-                                                           model.buffers[0].data.end())});
-        b["uri"] = encodeUriPath(name);
-        continue;
-      }
-      rewrite(b);
+  for (size_t i = 0; i < doc["buffers"].size(); ++i)
+    collect(doc["buffers"][i], "buffers[" + std::to_string(i) + "]");
+  for (size_t i = 0; i < doc["images"].size(); ++i)
+    collect(doc["images"][i], "images[" + std::to_string(i) + "]");
+  if (!options.glb) {
+    std::set<fs::path> sources = {inputFile};
+    for (const FileRef& r : refs) sources.insert(r.source);
+    std::vector<std::string> reserved = options.reservedNames;
+    reserved.insert(reserved.end(), {out.fileName, uvBufferName});
+    if (glb) reserved.push_back(glbChunkName);
+    reserved.insert(reserved.end(), options.ldrPages.begin(), options.ldrPages.end());
+    ResourcePlacer placer(outputDir, reserved, sources);
+    std::set<std::string> copied;
+    for (FileRef& r : refs) {
+      bool inPlace = false;
+      const std::string name = placer.place(r.source, r.wanted, &inPlace);
+      (*r.element)["uri"] = encodeUriPath(name);
+      if (!inPlace && copied.insert(name).second) out.copies.push_back({name, r.source.string()});
+    }
+    // A .glb input's binary chunk becomes a file.
+    if (glb && !doc["buffers"].empty() && doc["buffers"][0].is_object() &&
+        !doc["buffers"][0].contains("uri") && !model.buffers.empty()) {
+      out.binaries.push_back({glbChunkName, std::vector<uint8_t>(model.buffers[0].data.begin(),
+                                                                 model.buffers[0].data.end())});
+      doc["buffers"][0]["uri"] = encodeUriPath(glbChunkName);
     }
   }
-  if (doc.contains("images") && doc["images"].is_array())
-    for (Json& image : doc["images"]) rewrite(image);
 
   // Lightmaps on the root and on every lightmapped node.
   if (Json* k = kilnExtras(doc)) {
@@ -539,10 +685,42 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
   if (!doc.contains("accessors")) doc["accessors"] = Json::array();
   if (!doc.contains("bufferViews")) doc["bufferViews"] = Json::array();
   if (!doc.contains("meshes")) doc["meshes"] = Json::array();
-  if (!doc.contains("buffers")) doc["buffers"] = Json::array();
+  if (!doc.contains("textures") || !doc["textures"].is_array()) doc["textures"] = Json::array();
+  if (!doc.contains("samplers") || !doc["samplers"].is_array()) doc["samplers"] = Json::array();
   const int newBuffer = int(doc["buffers"].size());
   BinaryBuilder bin(doc, newBuffer);
   const std::vector<glm::dmat4> world = worldMatrices(model);
+
+  // The lightmap textures: one image (the LDR PNG) and texture per page, one sampler.
+  const size_t firstLightmapImage = doc["images"].size();
+  if (!options.ldrPages.empty())
+    doc["samplers"].push_back({{"magFilter", 9729},   // LINEAR
+                             {"minFilter", 9729},   // LINEAR, no mipmaps
+                             {"wrapS", 33071},      // CLAMP_TO_EDGE
+                             {"wrapT", 33071},
+                             {"name", "kiln lightmap"}});
+  const size_t sampler = doc["samplers"].size() - 1;
+  std::vector<size_t> pageTexture;
+  for (size_t p = 0; p < options.ldrPages.size(); ++p) {
+    doc["images"].push_back({{"uri", encodeUriPath(options.ldrPages[p])},
+                             {"mimeType", "image/png"},
+                             {"name", "lightmap-" + std::to_string(p)}});
+    doc["textures"].push_back({{"sampler", sampler},
+                               {"source", doc["images"].size() - 1},
+                               {"name", "lightmap-" + std::to_string(p)}});
+    pageTexture.push_back(doc["textures"].size() - 1);
+  }
+  const bool rgbm = options.ldr == LdrEncoding::Rgbm;
+
+  // How many nodes use each mesh: a node's TEXCOORD_1 can only change in place when it is the
+  // mesh's only user.
+  std::vector<int> meshUsers(doc["meshes"].size(), 0);
+  for (const Json& node : doc["nodes"])
+    if (node.is_object() && node.contains("mesh") && node["mesh"].is_number_integer()) {
+      const int64_t m = node["mesh"].get<int64_t>();
+      if (m >= 0 && size_t(m) < meshUsers.size()) ++meshUsers[size_t(m)];
+    }
+  bool lightmapUsed = false;
 
   for (size_t i = 0; i < result.scene.objects.size(); ++i) {
     const Object& o = result.scene.objects[i];
@@ -552,57 +730,115 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
                    std::to_string(o.nodeIndex)};
     Json& node = doc["nodes"][size_t(o.nodeIndex)];
     const std::string where = "nodes[" + std::to_string(o.nodeIndex) + "] '" + o.name + "'";
-    if (i < result.layout.objects.size() && result.layout.objects[i].lightmapIndex >= 0) {
+    const bool lightmapped =
+        i < result.layout.objects.size() && result.layout.objects[i].lightmapIndex >= 0;
+    const vec4 so = lightmapped ? result.layout.objects[i].scaleOffset : kIdentityUv;
+    // With atlasUv the transform moves into TEXCOORD_1 and the glTF's is identity.
+    const vec4 uvTransform = lightmapped && options.atlasUv ? so : kIdentityUv;
+    const vec4 nodeSo = lightmapped && options.atlasUv ? kIdentityUv : so;
+    if (lightmapped) {
       const AtlasObject& a = result.layout.objects[i];
+      if (size_t(a.lightmapIndex) >= pageTexture.size())
+        return Error{where + ": lightmap " + std::to_string(a.lightmapIndex) + " has no page"};
       if (Json* k = kilnExtras(node)) {
-        (*k)["lightmap"] = {
-            {"index", a.lightmapIndex},
-            {"scaleOffset", {a.scaleOffset.x, a.scaleOffset.y, a.scaleOffset.z, a.scaleOffset.w}}};
+        (*k)["lightmap"] = {{"index", a.lightmapIndex},
+                            {"scaleOffset", {nodeSo.x, nodeSo.y, nodeSo.z, nodeSo.w}}};
       } else {
         out.warnings.push_back(scenePath + ": " + where +
                                ": extras is not an object; its lightmap is only in manifest.json");
       }
+      if (!node.contains("extensions")) node["extensions"] = Json::object();
+      if (!node["extensions"].is_object()) {
+        out.warnings.push_back(scenePath + ": " + where + ": extensions is not an object; no " +
+                               kLightmapExtension);
+      } else {
+        node["extensions"][kLightmapExtension] = {
+            {"lightMapTexture", {{"index", pageTexture[size_t(a.lightmapIndex)]}, {"texCoord", 1}}},
+            {"scale", {nodeSo.x, nodeSo.y}},
+            {"offset", {nodeSo.z, nodeSo.w}},
+            {"intensity", lightmapIntensity(options.ldr)},
+            {"extras",
+             {{"kiln",
+               {{"page", a.lightmapIndex},
+                {"encoding", rgbm ? "rgbm" : "dldr"},
+                {"range", rgbm ? int(kRgbmRange) : int(kDldrRange)}}}}}};
+        lightmapUsed = true;
+      }
     }
-    if (i >= result.unwraps.size() || !result.unwraps[i]) continue;
+    const bool generated = i < result.unwraps.size() && result.unwraps[i].has_value();
+    if (!generated && !(lightmapped && options.atlasUv)) continue;
 
-    // Generated UVs: a new mesh for this node alone.
-    const UnwrapResult& unwrap = *result.unwraps[i];
     const int meshIndex = model.nodes[size_t(o.nodeIndex)].mesh;
     if (meshIndex < 0 || size_t(meshIndex) >= model.meshes.size())
       return Error{scenePath + ": " + where + " has no mesh"};
     const tinygltf::Mesh& mesh = model.meshes[size_t(meshIndex)];
     const glm::dmat4& w = world[size_t(o.nodeIndex)];
-    std::optional<SourceMap> src = traceSources(model, mesh, w);
-    // The trace must reproduce the loader's vertices: same triangle count, every new vertex at
-    // its source's world position (float rounding aside).
-    bool traced = src.has_value();
-    if (traced) {
-      size_t triangles = 0;
-      for (size_t t : src->primitiveTriangles) triangles += t;
-      traced = triangles == unwrap.triangles.size() && unwrap.vertexRemap.size() == o.positions.size();
-      for (size_t v = 0; traced && v < unwrap.vertexRemap.size(); ++v) {
-        const uint32_t s = unwrap.vertexRemap[v];
-        if (s >= src->worldPositions.size()) {
-          traced = false;
-          break;
-        }
-        const vec3 d = src->worldPositions[s] - o.positions[v];
-        const float scale = 1.0f + maxComponent(glm::abs(o.positions[v]));
-        traced = maxComponent(glm::abs(d)) <= 1e-4f * scale;
-      }
-    }
     const Json& meshJson = doc["meshes"][size_t(meshIndex)];
     std::optional<Json> primitives;
     const size_t mark = bin.bytes().size();
-    if (traced) {
-      const size_t accessors = doc["accessors"].size(), views = doc["bufferViews"].size();
-      primitives = rebuildFromSources(model, meshJson, mesh, *src, unwrap,
-                                      glm::determinant(glm::dmat3(w)) < 0.0, bin);
-      if (!primitives) {  // undo the partial rebuild
-        doc["accessors"].erase(doc["accessors"].begin() + long(accessors), doc["accessors"].end());
-        doc["bufferViews"].erase(doc["bufferViews"].begin() + long(views),
-                                 doc["bufferViews"].end());
-        bin.bytes().resize(mark);
+    const size_t accessors = doc["accessors"].size(), views = doc["bufferViews"].size();
+    auto undo = [&]() {  // drops a partial rebuild
+      doc["accessors"].erase(doc["accessors"].begin() + long(accessors), doc["accessors"].end());
+      doc["bufferViews"].erase(doc["bufferViews"].begin() + long(views), doc["bufferViews"].end());
+      bin.bytes().resize(mark);
+    };
+
+    if (!generated) {
+      // atlasUv on the node's own TEXCOORD_1: a new accessor per primitive, everything else
+      // shared with the original mesh.
+      primitives = meshJson["primitives"];
+      for (size_t j = 0; j < mesh.primitives.size() && primitives; ++j) {
+        auto uv = mesh.primitives[j].attributes.find("TEXCOORD_1");
+        if (uv == mesh.primitives[j].attributes.end()) continue;
+        std::optional<AccessorView> v = viewAccessor(model, uv->second);
+        if (!v || v->components != 2) {
+          primitives.reset();
+          break;
+        }
+        std::vector<float> values;
+        values.reserve(v->count * 2);
+        const size_t cs = v->elemSize / 2;
+        for (size_t k = 0; k < v->count; ++k) {
+          const vec2 t(float(readGltfComponent(v->element(k), v->componentType, v->normalized)),
+                       float(readGltfComponent(v->element(k) + cs, v->componentType,
+                                               v->normalized)));
+          const vec2 a = applyUvTransform(t, uvTransform);
+          values.insert(values.end(), {a.x, a.y});
+        }
+        (*primitives)[j]["attributes"]["TEXCOORD_1"] = bin.addFloats(values, 2, "VEC2", false);
+      }
+      if (primitives && meshUsers[size_t(meshIndex)] == 1) {
+        doc["meshes"][size_t(meshIndex)]["primitives"] = *primitives;  // its only user
+        continue;
+      }
+      if (!primitives) undo();
+    } else {
+      // Generated UVs: a new mesh for this node alone.
+      const UnwrapResult& unwrap = *result.unwraps[i];
+      std::optional<SourceMap> src = traceSources(model, mesh, w);
+      // The trace must reproduce the loader's vertices: same triangle count, every new vertex
+      // at its source's world position (float rounding aside).
+      bool traced = src.has_value();
+      if (traced) {
+        size_t triangles = 0;
+        for (size_t t : src->primitiveTriangles) triangles += t;
+        traced = triangles == unwrap.triangles.size() &&
+                 unwrap.vertexRemap.size() == o.positions.size();
+        for (size_t v = 0; traced && v < unwrap.vertexRemap.size(); ++v) {
+          const uint32_t s = unwrap.vertexRemap[v];
+          if (s >= src->worldPositions.size()) {
+            traced = false;
+            break;
+          }
+          const vec3 d = src->worldPositions[s] - o.positions[v];
+          const float scale = 1.0f + maxComponent(glm::abs(o.positions[v]));
+          traced = maxComponent(glm::abs(d)) <= 1e-4f * scale;
+        }
+      }
+      if (traced) {
+        primitives = rebuildFromSources(model, meshJson, mesh, *src, unwrap,
+                                        glm::determinant(glm::dmat3(w)) < 0.0, uvTransform, bin);
+        if (!primitives) undo();
       }
     }
     if (!primitives) {
@@ -610,7 +846,7 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
                              ": the mesh's own vertex attributes could not be traced (sparse or "
                              "compressed accessors); its lightmapped mesh was rebuilt from "
                              "positions, normals and UVs only");
-      primitives = rebuildFromObject(o, w, model.materials.size(), bin);
+      primitives = rebuildFromObject(o, w, model.materials.size(), uvTransform, bin);
     }
     Json newMesh = meshJson;
     newMesh["primitives"] = *primitives;
@@ -621,15 +857,155 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
     doc["meshes"].push_back(newMesh);
     node["mesh"] = doc["meshes"].size() - 1;
   }
+  if (lightmapUsed) {
+    if (!doc.contains("extensionsUsed") || !doc["extensionsUsed"].is_array())
+      doc["extensionsUsed"] = Json::array();
+    Json& used = doc["extensionsUsed"];
+    if (std::find(used.begin(), used.end(), Json(kLightmapExtension)) == used.end())
+      used.push_back(kLightmapExtension);
+  }
+
+  // Baked lights: a viewer must not add them again. Instances of one light that differ (a
+  // Shadowmask light without a channel is baked fully) get a copy of the light each.
+  if (!result.scene.lights.empty() && doc.contains("extensions") &&
+      doc["extensions"].is_object() && doc["extensions"].contains("KHR_lights_punctual") &&
+      doc["extensions"]["KHR_lights_punctual"].is_object() &&
+      doc["extensions"]["KHR_lights_punctual"].contains("lights") &&
+      doc["extensions"]["KHR_lights_punctual"]["lights"].is_array()) {
+    Json& lights = doc["extensions"]["KHR_lights_punctual"]["lights"];
+    const LightModePlan& plan = result.lightModes;
+    std::map<std::pair<int, bool>, size_t> definition;  // (light, baked) -> lights[] index
+    std::set<int> marked;
+    for (size_t l = 0; l < result.scene.lights.size(); ++l) {
+      const Light& light = result.scene.lights[l];
+      if (light.lightIndex < 0 || size_t(light.lightIndex) >= lights.size() ||
+          light.nodeIndex < 0 || size_t(light.nodeIndex) >= doc["nodes"].size())
+        continue;
+      const bool baked = l < plan.bakeDirect.size() ? bool(plan.bakeDirect[l])
+                                                    : light.mode == LightMode::Baked;
+      auto mark = [&](Json& element) {
+        if (Json* k = kilnExtras(element)) {
+          (*k)["baked"] = baked;
+          (*k)["mode"] = lightModeName(light.mode);
+        } else {
+          out.warnings.push_back(scenePath + ": extensions.KHR_lights_punctual.lights[" +
+                                 std::to_string(light.lightIndex) +
+                                 "]: extras is not an object; not marked baked or not");
+        }
+      };
+      const std::pair<int, bool> key{light.lightIndex, baked};
+      if (definition.count(key)) {
+        if (definition[key] != size_t(light.lightIndex))
+          doc["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
+              definition[key];
+        continue;
+      }
+      if (marked.insert(light.lightIndex).second) {
+        mark(lights[size_t(light.lightIndex)]);
+        definition[key] = size_t(light.lightIndex);
+        continue;
+      }
+      Json copy = lights[size_t(light.lightIndex)];
+      mark(copy);
+      lights.push_back(copy);
+      definition[key] = lights.size() - 1;
+      doc["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
+          lights.size() - 1;
+    }
+  }
 
   if (!bin.bytes().empty()) {
-    const std::string name = stem + "_lightmap_uv.bin";
-    doc["buffers"].push_back({{"uri", encodeUriPath(name)}, {"byteLength", bin.bytes().size()}});
-    out.binaries.push_back({name, std::move(bin.bytes())});
+    doc["buffers"].push_back(
+        {{"uri", encodeUriPath(uvBufferName)}, {"byteLength", bin.bytes().size()}});
+    if (!options.glb) out.binaries.push_back({uvBufferName, bin.bytes()});
   }
-  for (const char* key : {"accessors", "bufferViews", "meshes", "buffers"})
+
+  if (options.glb) {
+    // One file: every buffer into the BIN chunk (each starting on 8 bytes, so that every
+    // accessor keeps its alignment), every image with a URI into a bufferView of its own.
+    std::vector<uint8_t> chunk;
+    std::vector<size_t> base;
+    for (size_t b = 0; b < doc["buffers"].size(); ++b) {
+      const Json& buffer = doc["buffers"][b];
+      const size_t length = buffer.is_object() && buffer.contains("byteLength") &&
+                                    buffer["byteLength"].is_number_unsigned()
+                                ? buffer["byteLength"].get<size_t>()
+                                : 0;
+      const std::vector<unsigned char>& data =
+          b < model.buffers.size() ? model.buffers[b].data : bin.bytes();
+      if (data.size() < length)
+        return Error{scenePath + ": buffers[" + std::to_string(b) + "] holds " +
+                     std::to_string(data.size()) + " bytes, less than its byteLength " +
+                     std::to_string(length)};
+      while (chunk.size() % 8) chunk.push_back(0);
+      base.push_back(chunk.size());
+      chunk.insert(chunk.end(), data.begin(), data.begin() + long(length));
+    }
+    for (Json& view : doc["bufferViews"]) {
+      if (!view.is_object() || !view.contains("buffer") || !view["buffer"].is_number_unsigned())
+        continue;
+      const size_t b = view["buffer"].get<size_t>();
+      if (b >= base.size()) continue;  // the loader rejects it; leave it as it was
+      view["buffer"] = 0;
+      view["byteOffset"] = base[b] + view.value("byteOffset", size_t(0));
+    }
+    for (size_t i = 0; i < doc["images"].size(); ++i) {
+      Json& image = doc["images"][i];
+      if (!image.is_object() || !image.contains("uri") || !image["uri"].is_string()) continue;
+      const std::string uri = image["uri"].get<std::string>();
+      const bool page = i >= firstLightmapImage;
+      const std::vector<unsigned char>& bytes =
+          page ? options.ldrPngs[i - firstLightmapImage] : model.images[i].image;
+      if (bytes.empty()) continue;  // not found: warned above, the URI kept
+      const std::string mime = page ? "image/png" : imageMimeType(uri, image, bytes);
+      if (mime.empty()) {
+        out.warnings.push_back(scenePath + ": images[" + std::to_string(i) +
+                               "]: unknown image type; left as the URI '" + uri + "'");
+        continue;
+      }
+      while (chunk.size() % 4) chunk.push_back(0);
+      doc["bufferViews"].push_back(
+          {{"buffer", 0}, {"byteOffset", chunk.size()}, {"byteLength", bytes.size()}});
+      chunk.insert(chunk.end(), bytes.begin(), bytes.end());
+      image.erase("uri");
+      image["bufferView"] = doc["bufferViews"].size() - 1;
+      image["mimeType"] = mime;
+    }
+    while (chunk.size() % 4) chunk.push_back(0);
+    doc["buffers"] = Json::array();
+    if (!chunk.empty()) doc["buffers"].push_back({{"byteLength", chunk.size()}});
+    for (const char* key : {"accessors", "bufferViews", "meshes", "buffers", "textures",
+                            "samplers", "images"})
+      if (doc[key].empty()) doc.erase(key);
+    std::string json = doc.dump();
+    while (json.size() % 4) json.push_back(' ');  // the JSON chunk is padded with spaces
+    auto u32 = [&](uint32_t v) {
+      for (int k = 0; k < 4; ++k) out.contents.push_back(uint8_t(v >> (8 * k)));
+    };
+    const uint64_t total = 12 + 8 + json.size() + (chunk.empty() ? 0 : 8 + chunk.size());
+    if (total > 0xFFFFFFFFull)
+      return Error{scenePath + ": the output .glb would be " + std::to_string(total) +
+                   " bytes, more than a .glb can hold (4 GiB); write a .gltf instead"};
+    out.contents.reserve(size_t(total));
+    out.contents.insert(out.contents.end(), {'g', 'l', 'T', 'F'});
+    u32(2);
+    u32(uint32_t(total));
+    u32(uint32_t(json.size()));
+    out.contents.insert(out.contents.end(), {'J', 'S', 'O', 'N'});
+    out.contents.insert(out.contents.end(), json.begin(), json.end());
+    if (!chunk.empty()) {
+      u32(uint32_t(chunk.size()));
+      out.contents.insert(out.contents.end(), {'B', 'I', 'N', 0});
+      out.contents.insert(out.contents.end(), chunk.begin(), chunk.end());
+    }
+    return out;
+  }
+
+  for (const char* key : {"accessors", "bufferViews", "meshes", "buffers", "textures",
+                          "samplers", "images"})
     if (doc[key].empty()) doc.erase(key);
-  out.text = doc.dump(1) + "\n";
+  const std::string text = doc.dump(1) + "\n";
+  out.contents.assign(text.begin(), text.end());
   return out;
 }
 

@@ -4,6 +4,7 @@
 // manifest last, so that a failure leaves the previous outputs as they were.
 #include "lightmap/lightmap_writer.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <cstdlib>
@@ -39,10 +40,15 @@ class StagedFiles {
   explicit StagedFiles(fs::path dir) : dir_(std::move(dir)) {}
   ~StagedFiles() { discard(); }
 
-  // Writes `name` through `write(temporaryPath)`.
+  // Writes `name` (relative to the directory; its folders are created) through
+  // `write(temporaryPath)`.
   Status stage(const std::string& name, const std::function<Status(const std::string&)>& write) {
-    const std::string tmp = (dir_ / (name + ".kiln-tmp")).string();
+    const std::string tmp = temporaryPath(name);
     staged_.push_back({tmp, (dir_ / name).string()});
+    names_.push_back(name);
+    std::error_code ec;
+    fs::create_directories((dir_ / name).parent_path(), ec);
+    if (ec) return Error{(dir_ / name).parent_path().string() + ": " + ec.message()};
     Status s = write(tmp);
     if (!s) return Error{(dir_ / name).string() + ": " + s.error()};
     return Status::success();
@@ -61,6 +67,11 @@ class StagedFiles {
     return Status::success();
   }
 
+  std::string temporaryPath(const std::string& name) const {
+    return (dir_ / (name + ".kiln-tmp")).string();
+  }
+  const std::vector<std::string>& names() const { return names_; }
+
   void discard() {
     for (const auto& [tmp, final] : staged_) {
       std::error_code ec;
@@ -73,7 +84,20 @@ class StagedFiles {
  private:
   fs::path dir_;
   std::vector<std::pair<std::string, std::string>> staged_;  // temporary, final
+  std::vector<std::string> names_;                           // every name staged
 };
+
+Result<std::vector<uint8_t>> readBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error{path + ": cannot open the file"};
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) return Error{path + ": read failed"};
+  return bytes;
+}
+
+// A share of a page's valid texels above dLDR's range, in percent, worth a warning: the PNG
+// clamps them (RGBM's range is 8).
+constexpr double kDldrClampWarningPercent = 1.0;
 
 const char* ldrName(LdrEncoding e) {
   switch (e) {
@@ -134,8 +158,19 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
 
 Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResult& result,
                             const LightmapBakeSettings& settings,
-                            const LightmapOutputSettings& output) {
-  if (output.outDir.empty()) return Error{"no output directory given"};
+                            const LightmapOutputSettings& requested,
+                            std::vector<std::string>* warningsOut) {
+  if (requested.outDir.empty()) return Error{"no output directory given"};
+  // The output glTF's lightmap textures are the LDR pages: dLDR unless --ldr chose RGBM.
+  LightmapOutputSettings output = requested;
+  if (output.writeGltf && output.ldr == LdrEncoding::None) output.ldr = LdrEncoding::Dldr;
+  const LdrEncoding ldr = output.ldr;
+  OutputGltfOptions gltfOptions;
+  gltfOptions.outDir = output.outDir;
+  gltfOptions.ldr = ldr;
+  gltfOptions.atlasUv = output.atlasUv;
+  gltfOptions.glb = output.glb;
+  std::vector<std::string> extraWarnings;
   if (result.pages.size() != result.layout.pages.size())
     return Error{"bake result has " + std::to_string(result.pages.size()) + " pages but its atlas " +
                  std::to_string(result.layout.pages.size())};
@@ -185,15 +220,45 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
           !s)
         return s;
     }
-    if (output.ldr != LdrEncoding::None) {
+    if (ldr != LdrEncoding::None) {
       const std::string name =
-          "lightmap-" + std::to_string(index) + "_light_" + ldrName(output.ldr) + ".png";
+          "lightmap-" + std::to_string(index) + "_light_" + ldrName(ldr) + ".png";
       fileNames["lightLdr"] = name;
-      const LdrImage ldr =
-          output.ldr == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
-      if (Status s = files.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldr); });
+      const LdrImage ldrImage =
+          ldr == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
+      if (Status s =
+              files.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldrImage); });
           !s)
         return s;
+      gltfOptions.ldrPages.push_back(name);
+      if (output.glb && output.writeGltf) {  // the .glb embeds the PNG's very bytes
+        Result<std::vector<uint8_t>> png = readBytes(files.temporaryPath(name));
+        if (!png) return Error{png.error()};
+        gltfOptions.ldrPngs.push_back(std::move(png).value());
+      }
+      if (ldr == LdrEncoding::Dldr) {
+        // Texels dLDR clamps: a bright scene wants RGBM.
+        size_t valid = 0, clamped = 0;
+        float brightest = 0.0f;
+        for (size_t t = 0; t < page.valid.size(); ++t) {
+          if (!page.valid[t]) continue;
+          const float* p = &page.light.pixels[t * size_t(page.light.channels)];
+          const float m = std::max({p[0], p[1], p[2]});
+          ++valid;
+          if (m > kDldrRange) ++clamped;
+          brightest = std::max(brightest, m);
+        }
+        const double percent = valid ? 100.0 * double(clamped) / double(valid) : 0.0;
+        if (percent > kDldrClampWarningPercent) {
+          char text[64];
+          std::snprintf(text, sizeof text, "%.1f%% of the valid texels (E/pi up to %.3g)", percent,
+                        double(brightest));
+          extraWarnings.push_back(name + ": " + text + " exceed dLDR's range " +
+                                  std::to_string(int(kDldrRange)) +
+                                  " and are clamped; --ldr rgbm keeps values up to " +
+                                  std::to_string(int(kRgbmRange)));
+        }
+      }
     }
     lightmaps[i]["files"] = fileNames;
   }
@@ -216,18 +281,19 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
     lights.push_back(e);
   }
   manifest["lights"] = lights;
-  if (output.ldr != LdrEncoding::None)
+  if (ldr != LdrEncoding::None)
     manifest["settings"]["ldrDecode"] =
-        output.ldr == LdrEncoding::Rgbm
+        ldr == LdrEncoding::Rgbm
             ? "rgb = png.rgb * png.a * " + std::to_string(int(kRgbmRange)) +
                   " (PNG sampled as linear UNORM)"
             : std::string("rgb = 2 * png.rgb (PNG sampled as sRGB, i.e. linearised)");
 
-  std::vector<std::string> warnings = result.warnings;
   if (output.writeGltf) {
-    Result<OutputGltf> gltf = buildOutputGltf(scenePath, result, lightmaps, output.outDir);
+    gltfOptions.reservedNames = files.names();
+    gltfOptions.reservedNames.push_back(kManifestFileName);
+    Result<OutputGltf> gltf = buildOutputGltf(scenePath, result, lightmaps, gltfOptions);
     if (!gltf) return Error{gltf.error()};
-    for (const std::string& w : gltf->warnings) warnings.push_back(w);
+    for (const std::string& w : gltf->warnings) extraWarnings.push_back(w);
     for (const auto& [name, bytes] : gltf->binaries)
       if (Status s = files.stage(name,
                                  [&](const std::string& p) {
@@ -235,15 +301,30 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
                                  });
           !s)
         return s;
-    const std::string& text = gltf->text;
+    for (const auto& [name, source] : gltf->copies)
+      if (Status s = files.stage(name,
+                                 [&](const std::string& p) -> Status {
+                                   std::error_code failed;
+                                   fs::copy_file(source, p, fs::copy_options::overwrite_existing,
+                                                 failed);
+                                   if (failed)
+                                     return Error{"cannot copy " + source + ": " + failed.message()};
+                                   return Status::success();
+                                 });
+          !s)
+        return s;
+    const std::vector<uint8_t>& contents = gltf->contents;
     if (Status s = files.stage(gltf->fileName,
                                [&](const std::string& p) {
-                                 return writeBytes(p, text.data(), text.size());
+                                 return writeBytes(p, contents.data(), contents.size());
                                });
         !s)
       return s;
     manifest["gltf"] = gltf->fileName;
   }
+  std::vector<std::string> warnings = result.warnings;
+  warnings.insert(warnings.end(), extraWarnings.begin(), extraWarnings.end());
+  if (warningsOut) *warningsOut = extraWarnings;
   manifest["scene"] = fs::path(scenePath).filename().string();
   manifest["warnings"] = warnings;
   manifest["stats"] = {{"texels", result.stats.texels},

@@ -1050,6 +1050,7 @@ class Loader {
     if (auto v = e.choice("receiveGI", {"lightmaps", "probes"}))
       settings->receiveGI = *v == "probes" ? ReceiveGI::Probes : ReceiveGI::Lightmaps;
     if (auto v = e.boolean("lppv")) settings->lppv = *v;
+    e.find("lightmap");  // kiln bake writes it into its output glTF; a bake of that repacks
     if (const Json* p = e.find("probes")) {
       if (!p->is_array()) fail(e.where("probes"), "must be an array of [x, y, z] positions");
       *hasProbes = true;
@@ -1161,6 +1162,7 @@ class Loader {
       if (auto v = x.number("shadowRadius", 0.0, 1e9, ">= 0")) l.shadowRadius = *v;
       if (auto v = x.number("shadowAngle", 0.0, 90.0, "in [0, 90] (degrees)")) l.shadowAngle = *v;
       if (auto v = x.integer("shadowSamples", 1, 65536, "in [1, 65536]")) l.shadowSamples = *v;
+      x.boolean("baked");  // kiln bake's mark in its output glTF, for viewers
       x.warnUnknown(this);
     }
     scene_.lights.push_back(std::move(l));

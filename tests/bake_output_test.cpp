@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <tuple>
 #include <vector>
 
@@ -218,7 +219,8 @@ TEST(LightmapWriter, FailureLeavesEarlierOutputsIntact) {
   std::map<std::string, std::string> before;
   for (const auto& e : fs::directory_iterator(out.outDir))
     before[e.path().filename().string()] = readBytes(e.path().string());
-  EXPECT_EQ(before.size(), 3u);  // EXR, manifest, glTF
+  // EXR, dLDR PNG (the glTF's lightmap texture), manifest, glTF, its buffer copied
+  EXPECT_EQ(before.size(), 5u);
 
   for (float& v : r.pages[0].light.pixels) v = 7.0f;  // different content
   fs::remove(scenePath);
@@ -319,7 +321,7 @@ TEST(GltfWriter, GeneratedUvsRebuildLocalMeshes) {
   EXPECT_EQ(o["nodes"][0]["mesh"], 1);
   EXPECT_EQ(o["nodes"][1]["mesh"], 2);
   EXPECT_EQ(o["nodes"][1]["extras"]["note"], 1);  // other extras kept
-  EXPECT_EQ(o["buffers"][0]["uri"], "../two.bin");
+  EXPECT_EQ(o["buffers"][0]["uri"], "two.bin");  // copied: the output is self-contained
   EXPECT_EQ(o["buffers"][1]["uri"], "two_lightmap_uv.bin");
   const Json m = readJson(out.outDir + "/manifest.json");
   EXPECT_TRUE(m["warnings"].empty()) << m["warnings"].dump();  // no fallback rebuild
@@ -571,6 +573,25 @@ std::string writeMixedScene(const std::string& dir, const std::string& lightingM
   return path;
 }
 
+// The output glTF marks each KHR_lights_punctual light: extras.kiln.baked is the manifest's
+// bakedDirect (its direct light is in the lightmaps, a viewer must not add it again) and
+// extras.kiln.mode its mode. Returns the marks by light name.
+std::map<std::string, bool> expectBakedLightMarks(const std::string& outDir,
+                                                  const std::string& gltfName) {
+  const Json g = readJson(outDir + "/" + gltfName), m = readJson(outDir + "/manifest.json");
+  std::map<std::string, bool> marks;
+  EXPECT_FALSE(m["lights"].empty());
+  for (const Json& l : m["lights"]) {
+    const Json& node = g["nodes"][l["nodeIndex"].get<size_t>()];
+    const size_t index = node["extensions"]["KHR_lights_punctual"]["light"];
+    const Json& k = g["extensions"]["KHR_lights_punctual"]["lights"][index]["extras"]["kiln"];
+    EXPECT_EQ(k["baked"], l["bakedDirect"]) << l["name"];
+    EXPECT_EQ(k["mode"], l["mode"]) << l["name"];
+    marks[l["name"]] = k["baked"];
+  }
+  return marks;
+}
+
 // kiln bake in Shadowmask mode with --directional and --shadow-color: the manifest records the
 // mode, the colour and every light with the plan's channel; the shadowmask is 1 in full light
 // and 0 in hard shadow; the light and direction pages hold the baked lights' direct light and
@@ -589,6 +610,16 @@ TEST(BakeCommand, ShadowmaskDirectionalEndToEnd) {
       << out;
   // The fifth overlapping mixed light is baked fully, with a warning naming it.
   EXPECT_NE(out.find("kiln: warning: light 'lampD'"), std::string::npos) << out;
+  // ... and marked baked in the output glTF, like the baked light; the other mixed lights and
+  // the realtime one stay realtime.
+  const std::map<std::string, bool> marks = expectBakedLightMarks(dir + "/out", "mixed.gltf");
+  EXPECT_EQ(marks, (std::map<std::string, bool>{{"sun", false},
+                                                {"lampA", false},
+                                                {"lampB", false},
+                                                {"lampC", false},
+                                                {"lampD", true},
+                                                {"fill", false},
+                                                {"bulb", true}}));
 
   const Json m = readJson(dir + "/out/manifest.json");
   EXPECT_EQ(m["settings"]["lightingMode"], "shadowmask");
@@ -712,9 +743,10 @@ TEST(BakeCommand, SceneLightingModeAndDefaultShadowColor) {
   const std::string dir = test::makeTempDir("bake_mixed");
   const std::string scene = writeMixedScene(dir, "subtractive");
   std::string out;
+  // --ldr rgbm: the lights make E/pi up to 3.4, which dLDR would clamp (with a warning).
   ASSERT_EQ(kiln("bake " + scene + " --out " + dir +
                      "/out --resolution 4 --samples 4 "
-                     "--bounces 0 -q",
+                     "--bounces 0 --ldr rgbm -q",
                  &out),
             0)
       << out;
@@ -732,6 +764,9 @@ TEST(BakeCommand, SceneLightingModeAndDefaultShadowColor) {
     EXPECT_EQ(m["lights"][l]["shadowmaskChannel"], -1);
     EXPECT_EQ(m["lights"][l]["bakedDirect"], !realtime);
   }
+  // Subtractive: every mixed light is marked baked in the output glTF.
+  for (const auto& [name, baked] : expectBakedLightMarks(dir + "/out", "mixed.gltf"))
+    EXPECT_EQ(baked, name != "fill") << name;
   fs::remove_all(dir);
 }
 

@@ -52,6 +52,8 @@ struct BakeOptions {
   std::string lightingMode;
   std::optional<std::string> shadowColor;  // "R,G,B", parsed by parseShadowColor
   bool directional = false;
+  bool atlasUv = false;
+  bool glb = false;
   bool quiet = false;
 };
 
@@ -220,6 +222,8 @@ int runBake(const BakeOptions& o) {
   output.lockAtlas = o.lockAtlas;
   if (o.ldr == "rgbm") output.ldr = LdrEncoding::Rgbm;
   if (o.ldr == "dldr") output.ldr = LdrEncoding::Dldr;
+  output.atlasUv = o.atlasUv;
+  output.glb = o.glb;
 
   if (!o.lockAtlas.empty())
     if (int code = lockAtlas(o, scene, settings)) return code;
@@ -249,11 +253,13 @@ int runBake(const BakeOptions& o) {
     return kExitBadInput;
   }
   const LightmapBakeResult& result = *baked;
-  if (Status s = writeLightmapOutputs(o.scene, result, settings, output); !s) {
+  std::vector<std::string> writeWarnings;
+  if (Status s = writeLightmapOutputs(o.scene, result, settings, output, &writeWarnings); !s) {
     printError(s.error());
     return kExitBadInput;
   }
   for (const std::string& w : result.warnings) printWarning(w);
+  for (const std::string& w : writeWarnings) printWarning(w);
   if (!o.quiet) {
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -302,8 +308,13 @@ void registerBakeCommand(CLI::App& app) {
       ->capture_default_str();
   b->add_flag("--no-denoise", o->noDenoise, "Skip the edge-aware denoiser");
   b->add_flag("--ao", o->ao, "Also bake ambient occlusion (lightmap-<i>_ao.exr)");
-  b->add_option("--ldr", o->ldr, "Also write 8-bit PNGs: rgbm or dldr (decode: docs)")
+  b->add_option("--ldr", o->ldr,
+                "8-bit PNG pages, the output glTF's lightmap textures: dldr (default) or rgbm "
+                "(decode: docs)")
       ->check(CLI::IsMember({"rgbm", "dldr"}));
+  b->add_flag("--atlas-uv", o->atlasUv,
+              "Write atlas UVs into the output glTF's TEXCOORD_1 (identity scale/offset)");
+  b->add_flag("--glb", o->glb, "Write one self-contained <scene>.glb instead of .gltf + files");
   b->add_option("--lock-atlas", o->lockAtlas,
                 "Reuse the atlas of an earlier bake's manifest.json (same scene)");
   b->add_option("--lighting-mode", o->lightingMode,
