@@ -9,6 +9,10 @@ export const repoRoot = resolve(dirname(fileURLToPath(import.meta.url)), '..', '
 export const webDir = join(repoRoot, 'tools', 'web');
 export const scenesDir = join(repoRoot, 'tools', 'scenes');
 
+// The folder suffix of the --atlas-uv bake (bake_scenes.mjs): its extension's scale and
+// offset are identity, the atlas transform being in TEXCOORD_1.
+export const ATLAS_UV_SUFFIX = '_atlas_uv';
+
 // CTest's SKIP_RETURN_CODE for these tests.
 export const SKIP = 77;
 

@@ -19,8 +19,8 @@ import { spawnSync } from 'node:child_process';
 import { cpSync, existsSync, mkdirSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join, relative } from 'node:path';
 import {
-  compareImages, fileExists, importThree, requireWebPackage, outputOf, parseArgs, readJson, readPng,
-  rgbImage, scenes, sideBySide, skipOrFail, webDir, writePng, bakeDir,
+  ATLAS_UV_SUFFIX, compareImages, fileExists, importThree, requireWebPackage, outputOf, parseArgs, readJson, readPng,
+  rgbImage, scenes, scenesDir, sideBySide, skipOrFail, webDir, writePng, bakeDir,
 } from './common.mjs';
 
 const TOLERANCE = 0.02;  // relative mean difference, both in display and linear values
@@ -104,6 +104,13 @@ for (const s of scenes) {
   const glbDir = join(args.bakes, `${s.name}_glb`);
   const glb = join(glbDir, s.scene.replace(/\.gltf$/, '.glb'));
   if (existsSync(glb)) jobs.push({ ...s, label: `${s.name} (.glb)`, name: `${s.name}_glb`, dir: glbDir, file: glb });
+  // --atlas-uv: three.js reads the output (atlas UVs in TEXCOORD_1, identity transforms);
+  // kiln render reads the input scene with the bake's manifest, whose scaleOffset applies to
+  // the input's TEXCOORD_1 (the output's TEXCOORD_1 already holds the transform).
+  const atlasDir = join(args.bakes, `${s.name}${ATLAS_UV_SUFFIX}`);
+  if (existsSync(join(atlasDir, s.scene)))
+    jobs.push({ ...s, label: `${s.name} (--atlas-uv)`, name: `${s.name}${ATLAS_UV_SUFFIX}`, dir: atlasDir,
+                file: join(atlasDir, s.scene), kilnScene: join(scenesDir, s.scene) });
 }
 for (const job of jobs)
   if (!fileExists(job.file)) {
@@ -140,7 +147,7 @@ try {
     const [w, h] = job.size;
     const kilnPng = join(out, 'kiln.png'), kilnExr = join(out, 'kiln.exr');
     // kiln render of the output glTF with its lightmaps folder.
-    const renderArgs = ['render', job.file, '--lightmaps', job.dir,
+    const renderArgs = ['render', job.kilnScene || job.file, '--lightmaps', job.dir,
                         '--look-from', job.from.join(','), '--look-at', job.at.join(','),
                         '--fov', String(job.fov), '--size', `${w},${h}`,
                         '--exposure', String(job.exposure), '--quiet',

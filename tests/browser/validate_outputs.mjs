@@ -10,7 +10,8 @@
 //   - every primitive that has TEXCOORD_1 belongs to a mesh that a node with
 //     MX_lightmap.lightMapTexture.texCoord = 1 uses (no TEXCOORD_1 is left unused), and
 //     every such node's primitives have TEXCOORD_1;
-//   - per node, scale and offset are the manifest's scaleOffset, the texture's image is the
+//   - per node, scale and offset are the manifest's scaleOffset (identity in the --atlas-uv
+//     bake, whose TEXCOORD_1 holds the transform), the texture's image is the
 //     manifest page's LDR PNG (image/png), intensity is 2 pi (dldr) or pi (rgbm), the sampler
 //     is LINEAR / LINEAR (no mipmaps) / CLAMP_TO_EDGE, and extras.kiln.page is the node's
 //     lightmapIndex;
@@ -21,8 +22,8 @@
 //   node tests/browser/validate_outputs.mjs --bakes DIR
 // Exit: 0 pass, 1 fail, 77 skipped (gltf-validator not installed; not under CI=true).
 import { readdirSync, readFileSync, realpathSync, statSync } from 'node:fs';
-import { join, resolve, sep } from 'node:path';
-import { parseArgs, readJson, requireWebPackage } from './common.mjs';
+import { basename, join, resolve, sep } from 'node:path';
+import { ATLAS_UV_SUFFIX, parseArgs, readJson, requireWebPackage } from './common.mjs';
 
 const args = parseArgs(process.argv.slice(2), ['bakes'], 'validate_outputs.mjs --bakes DIR');
 const validator = requireWebPackage('gltf-validator');
@@ -38,7 +39,7 @@ function readGlbJson(bytes) {
 }
 
 // Own checks of the kiln extension; returns a list of failure messages.
-function checkLightmaps(file, json, manifest) {
+function checkLightmaps(file, json, manifest, atlasUv) {
   const failures = [];
   const where = (s) => `${file}: ${s}`;
   const nodes = json.nodes || [], meshes = json.meshes || [];
@@ -68,7 +69,8 @@ function checkLightmaps(file, json, manifest) {
       if (!lightmapUsers.has(node.mesh)) lightmapUsers.set(node.mesh, []);
       lightmapUsers.get(node.mesh).push(n);
     }
-    const so = object.scaleOffset;
+    // --atlas-uv outputs hold the transform in TEXCOORD_1: identity here.
+    const so = atlasUv ? [1, 1, 0, 0] : object.scaleOffset;
     if (JSON.stringify(ext.scale) !== JSON.stringify(so.slice(0, 2)) ||
         JSON.stringify(ext.offset) !== JSON.stringify(so.slice(2, 4)))
       failures.push(where(`${at}: scale ${JSON.stringify(ext.scale)} / offset ${JSON.stringify(ext.offset)}, the manifest's scaleOffset is ${JSON.stringify(so)}`));
@@ -218,7 +220,7 @@ for (const { dir, file } of outputs) {
     continue;
   }
   const manifest = readJson(join(dir, 'manifest.json'));
-  const own = checkLightmaps(file, json, manifest);
+  const own = checkLightmaps(file, json, manifest, basename(dir).endsWith(ATLAS_UV_SUFFIX));
   const lightmapped = (json.nodes || []).filter((n) => n.extensions && n.extensions.MX_lightmap).length;
   const uv1 = (json.meshes || []).reduce((a, m) => a + m.primitives.filter((p) => p.attributes.TEXCOORD_1 !== undefined).length, 0);
   if (own.length) {
