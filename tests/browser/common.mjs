@@ -1,0 +1,175 @@
+// common.mjs: what the browser and validator tests share: the scenes they bake, argument
+// parsing, skipping, images.
+import { existsSync, readFileSync, writeFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import { dirname, join, resolve } from 'node:path';
+import { fileURLToPath, pathToFileURL } from 'node:url';
+
+export const repoRoot = resolve(dirname(fileURLToPath(import.meta.url)), '..', '..');
+export const webDir = join(repoRoot, 'tools', 'web');
+export const scenesDir = join(repoRoot, 'tools', 'scenes');
+
+// The folder suffix of the --atlas-uv bake (bake_scenes.mjs): its extension's scale and
+// offset are identity, the atlas transform being in TEXCOORD_1.
+export const ATLAS_UV_SUFFIX = '_atlas_uv';
+
+// CTest's SKIP_RETURN_CODE for these tests.
+export const SKIP = 77;
+
+// The bakes (tests/browser/bake_scenes.mjs) and the view each scene is compared from. The
+// cameras are the scenes' own glTF cameras written as look-from / look-at / vertical fov
+// (tools/scenes/*.gltf, camera nodes: position, position + rotation x (0, 0, -1), yfov),
+// so that both renderers get them in the one form both take.
+export const scenes = [
+  {
+    name: 'cornell_box', scene: 'cornell_box.gltf', ldr: 'dldr',
+    bake: ['--preset', 'low', '--resolution', '60'],
+    from: [0.278, 0.273, -0.8], at: [0.278, 0.273, 0.2], fov: 39.3076481, size: [256, 256],
+    exposure: 0,
+  },
+  {
+    name: 'two_rooms', scene: 'two_rooms.gltf', ldr: 'rgbm',
+    bake: ['--preset', 'low'],
+    from: [0.4, 1.7, 3.6], at: [1.2257, 1.4477, 3.0954], fov: 70, size: [320, 180],
+    exposure: 1,
+  },
+  {
+    name: 'courtyard', scene: 'courtyard.gltf', ldr: 'dldr',
+    bake: ['--preset', 'low'],
+    from: [5.0, 11.0, -13.0], at: [4.669, 10.4207, -12.2552], fov: 60, size: [320, 180],
+    exposure: 0,
+  },
+];
+
+// --name value pairs into an object; `required` names must be present.
+export function parseArgs(argv, required, usage) {
+  const out = {};
+  for (let i = 0; i < argv.length; ++i) {
+    if (!argv[i].startsWith('--') || i + 1 >= argv.length) {
+      console.error(`bad argument ${argv[i]}\nusage: ${usage}`);
+      process.exit(2);
+    }
+    out[argv[i].slice(2)] = argv[++i];
+  }
+  for (const name of required)
+    if (out[name] === undefined) {
+      console.error(`missing --${name}\nusage: ${usage}`);
+      process.exit(2);
+    }
+  return out;
+}
+
+// A missing prerequisite skips the test with a message, except under CI (CI=true), which
+// runs tools/install_deps.sh first and must not pass by skipping.
+export function skipOrFail(message) {
+  if (process.env.CI && process.env.CI !== 'false' && process.env.CI !== '0') {
+    console.error(`FAILED: ${message} (CI=${process.env.CI}: CI installs every prerequisite ` +
+                  'with tools/install_deps.sh, so a missing one is an error there)');
+    process.exit(1);
+  }
+  console.log(`SKIPPED: ${message}`);
+  process.exit(SKIP);
+}
+
+// The npm packages of tools/web (installed by `npm ci` in tools/install_deps.sh). CommonJS
+// packages (puppeteer-core, pngjs, gltf-validator) through require; three.js's ES modules by
+// their file in node_modules/three, so that they and three.js's addons (which import
+// 'three' from there) share one three.js.
+const webRequire = createRequire(join(webDir, 'package.json'));
+
+export function requireWebPackage(name) {
+  try {
+    webRequire.resolve(name);
+  } catch {
+    skipOrFail(`npm package ${name} is not installed in ${webDir} ` +
+               '(run tools/install_deps.sh, or `npm ci` in tools/web)');
+  }
+  return webRequire(name);
+}
+
+export async function importThree(file = 'build/three.module.js') {
+  try {
+    webRequire.resolve('three');
+  } catch {
+    skipOrFail(`npm package three is not installed in ${webDir} ` +
+               '(run tools/install_deps.sh, or `npm ci` in tools/web)');
+  }
+  return import(pathToFileURL(join(webDir, 'node_modules', 'three', file)).href);
+}
+
+export function bakeDir(bakes, scene) {
+  return join(bakes, scene.name);
+}
+
+// The output glTF (or .glb) of a bake folder: the scene's name with .gltf.
+export function outputOf(bakes, scene) {
+  return join(bakeDir(bakes, scene), scene.scene);
+}
+
+export function readJson(path) {
+  return JSON.parse(readFileSync(path, 'utf8'));
+}
+
+export function fileExists(path) {
+  return existsSync(path);
+}
+
+// --- Images: {width, height, data: Float32Array RGB, row 0 at the top} ---
+
+export function rgbImage(width, height) {
+  return { width, height, data: new Float32Array(width * height * 3) };
+}
+
+// PNG (8-bit) to values / 255, no transfer function undone (as kiln render --compare reads).
+export function readPng(PNG, path) {
+  const png = PNG.sync.read(readFileSync(path));
+  const img = rgbImage(png.width, png.height);
+  for (let i = 0; i < png.width * png.height; ++i)
+    for (let c = 0; c < 3; ++c) img.data[3 * i + c] = png.data[4 * i + c] / 255;
+  return img;
+}
+
+export function writePng(PNG, path, img) {
+  const png = new PNG({ width: img.width, height: img.height });
+  for (let i = 0; i < img.width * img.height; ++i) {
+    for (let c = 0; c < 3; ++c)
+      png.data[4 * i + c] = Math.round(Math.min(Math.max(img.data[3 * i + c], 0), 1) * 255);
+    png.data[4 * i + 3] = 255;
+  }
+  writeFileSync(path, PNG.sync.write(png));
+}
+
+// Over every pixel and channel of a and b (b the reference, kiln render): mean |a - b|, the
+// means, and the relative mean difference sum |a - b| / sum |b| (= mean |a - b| / mean b).
+// The same quantities as `kiln render --compare`.
+export function compareImages(a, b) {
+  if (a.width !== b.width || a.height !== b.height)
+    throw new Error(`the images differ in size: ${a.width} x ${a.height} and ${b.width} x ${b.height}`);
+  let sumDiff = 0, sumA = 0, sumB = 0;
+  const diff = rgbImage(a.width, a.height);
+  for (let i = 0; i < a.data.length; ++i) {
+    const d = Math.abs(a.data[i] - b.data[i]);
+    diff.data[i] = d;
+    sumDiff += d;
+    sumA += a.data[i];
+    sumB += Math.abs(b.data[i]);
+  }
+  const n = a.data.length;
+  return { meanAbs: sumDiff / n, meanA: sumA / n, meanB: sumB / n,
+           relative: sumB > 0 ? sumDiff / sumB : 0, diff };
+}
+
+// b | a | |a - b| x scale, side by side (display values).
+export function sideBySide(b, a, diff, scale = 4) {
+  const out = rgbImage(3 * a.width, a.height);
+  for (let y = 0; y < a.height; ++y)
+    for (let x = 0; x < a.width; ++x)
+      for (let c = 0; c < 3; ++c) {
+        const i = 3 * (y * a.width + x) + c;
+        const row = 3 * y * 3 * a.width;
+        out.data[row + 3 * x + c] = b.data[i];
+        out.data[row + 3 * (x + a.width) + c] = a.data[i];
+        out.data[row + 3 * (x + 2 * a.width) + c] = Math.min(diff.data[i] * scale, 1);
+      }
+  return out;
+}

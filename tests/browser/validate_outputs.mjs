@@ -1,0 +1,241 @@
+#!/usr/bin/env node
+// validate_outputs.mjs: runs the Khronos glTF-Validator (npm gltf-validator) on every output
+// glTF and .glb that bake_scenes.mjs wrote, with its external resources loaded from the
+// output folder only (a URI that leaves the folder is an error: outputs are self-contained),
+// and asserts no error and no warning. Infos and hints are printed, counted by code.
+//
+// The validator does not know MX_lightmap, so it reports every TEXCOORD_1 as unused
+// (MESH_PRIMITIVE_UNUSED_TEXCOORD, info) and the lightmap textures as unused objects
+// (UNUSED_OBJECT); this script checks the extension itself instead (exact identities):
+//   - every primitive that has TEXCOORD_1 belongs to a mesh that a node with
+//     MX_lightmap.lightMapTexture.texCoord = 1 uses (no TEXCOORD_1 is left unused), and
+//     every such node's primitives have TEXCOORD_1;
+//   - per node, scale and offset are the manifest's scaleOffset (identity in the --atlas-uv
+//     bake, whose TEXCOORD_1 holds the transform), the texture's image is the
+//     manifest page's LDR PNG (image/png), intensity is 2 pi (dldr) or pi (rgbm), the sampler
+//     is LINEAR / LINEAR (no mipmaps) / CLAMP_TO_EDGE, and extras.kiln.page is the node's
+//     lightmapIndex;
+//   - every node the manifest lightmaps has the extension, and no other node has it;
+//   - KHR_lights_punctual lights: extras.kiln.baked is true exactly for the lights whose
+//     direct light the bake holds (manifest lights[].bakedDirect).
+//
+//   node tests/browser/validate_outputs.mjs --bakes DIR
+// Exit: 0 pass, 1 fail, 77 skipped (gltf-validator not installed; not under CI=true).
+import { readdirSync, readFileSync, realpathSync, statSync } from 'node:fs';
+import { basename, join, resolve, sep } from 'node:path';
+import { ATLAS_UV_SUFFIX, parseArgs, readJson, requireWebPackage } from './common.mjs';
+
+const args = parseArgs(process.argv.slice(2), ['bakes'], 'validate_outputs.mjs --bakes DIR');
+const validator = requireWebPackage('gltf-validator');
+
+const LINEAR = 9729, CLAMP_TO_EDGE = 33071;
+const SEVERITY = ['error', 'warning', 'info', 'hint'];
+
+function readGlbJson(bytes) {
+  if (bytes.readUInt32LE(0) !== 0x46546c67) throw new Error('not a GLB (bad magic)');
+  const length = bytes.readUInt32LE(12);
+  if (bytes.readUInt32LE(16) !== 0x4e4f534a) throw new Error('the first GLB chunk is not JSON');
+  return JSON.parse(bytes.subarray(20, 20 + length).toString('utf8'));
+}
+
+// Own checks of the kiln extension; returns a list of failure messages.
+function checkLightmaps(file, json, manifest, atlasUv) {
+  const failures = [];
+  const where = (s) => `${file}: ${s}`;
+  const nodes = json.nodes || [], meshes = json.meshes || [];
+  const lightmapUsers = new Map();  // mesh index -> nodes with MX_lightmap texCoord 1
+  const byNode = new Map((manifest.objects || []).map((o) => [o.nodeIndex, o]));
+  const pages = new Map((manifest.lightmaps || []).map((p) => [p.index, p]));
+  const used = (json.extensionsUsed || []).includes('MX_lightmap');
+  let count = 0;
+  nodes.forEach((node, n) => {
+    const ext = node.extensions && node.extensions.MX_lightmap;
+    const object = byNode.get(n);
+    const lightmapped = object && object.lightmapIndex >= 0;
+    if (!ext) {
+      if (lightmapped) failures.push(where(`nodes[${n}] ("${node.name}"): the manifest gives it lightmap ${object.lightmapIndex} but it has no MX_lightmap`));
+      return;
+    }
+    ++count;
+    const at = `nodes[${n}] ("${node.name}").extensions.MX_lightmap`;
+    if (!lightmapped) {
+      failures.push(where(`${at}: the manifest has no lightmap for this node`));
+      return;
+    }
+    if (node.mesh === undefined) failures.push(where(`${at}: the node has no mesh`));
+    const t = ext.lightMapTexture || {};
+    if (t.texCoord !== 1) failures.push(where(`${at}.lightMapTexture.texCoord: ${t.texCoord}, expected 1`));
+    else if (node.mesh !== undefined) {
+      if (!lightmapUsers.has(node.mesh)) lightmapUsers.set(node.mesh, []);
+      lightmapUsers.get(node.mesh).push(n);
+    }
+    // --atlas-uv outputs hold the transform in TEXCOORD_1: identity here.
+    const so = atlasUv ? [1, 1, 0, 0] : object.scaleOffset;
+    if (JSON.stringify(ext.scale) !== JSON.stringify(so.slice(0, 2)) ||
+        JSON.stringify(ext.offset) !== JSON.stringify(so.slice(2, 4)))
+      failures.push(where(`${at}: scale ${JSON.stringify(ext.scale)} / offset ${JSON.stringify(ext.offset)}, the manifest's scaleOffset is ${JSON.stringify(so)}`));
+    const kiln = (ext.extras && ext.extras.kiln) || {};
+    if (kiln.page !== object.lightmapIndex)
+      failures.push(where(`${at}.extras.kiln.page: ${kiln.page}, the manifest's lightmapIndex is ${object.lightmapIndex}`));
+    const expectedIntensity = { dldr: 2 * Math.PI, rgbm: Math.PI }[kiln.encoding];
+    const expectedRange = { dldr: 2, rgbm: 8 }[kiln.encoding];
+    if (expectedIntensity === undefined)
+      failures.push(where(`${at}.extras.kiln.encoding: "${kiln.encoding}", expected dldr or rgbm`));
+    else {
+      if (Math.abs(ext.intensity - expectedIntensity) > 1e-6 * expectedIntensity)
+        failures.push(where(`${at}.intensity: ${ext.intensity}, expected ${expectedIntensity} for ${kiln.encoding}`));
+      if (kiln.range !== expectedRange)
+        failures.push(where(`${at}.extras.kiln.range: ${kiln.range}, expected ${expectedRange} for ${kiln.encoding}`));
+    }
+    const texture = (json.textures || [])[t.index];
+    if (!texture) {
+      failures.push(where(`${at}.lightMapTexture.index: ${t.index} is not a texture`));
+      return;
+    }
+    const image = (json.images || [])[texture.source];
+    const page = pages.get(object.lightmapIndex);
+    const ldrFile = page && page.files && page.files.lightLdr;
+    if (!image || image.mimeType !== 'image/png')
+      failures.push(where(`textures[${t.index}].source: expected a PNG image (mimeType image/png)`));
+    else if (image.uri !== undefined && ldrFile !== undefined && image.uri !== ldrFile)
+      failures.push(where(`images[${texture.source}].uri: "${image.uri}", the manifest's page ${object.lightmapIndex} LDR file is "${ldrFile}"`));
+    else if (image.uri !== undefined && kiln.encoding && !image.uri.endsWith(`_${kiln.encoding}.png`))
+      failures.push(where(`images[${texture.source}].uri: "${image.uri}" is not a _${kiln.encoding}.png page`));
+    const sampler = (json.samplers || [])[texture.sampler];
+    if (!sampler || sampler.magFilter !== LINEAR || sampler.minFilter !== LINEAR ||
+        (sampler.wrapS ?? 10497) !== CLAMP_TO_EDGE || (sampler.wrapT ?? 10497) !== CLAMP_TO_EDGE)
+      failures.push(where(`textures[${t.index}].sampler: expected LINEAR/LINEAR filters and CLAMP_TO_EDGE, got ${JSON.stringify(sampler)}`));
+  });
+  if (count > 0 && !used) failures.push(where('extensionsUsed: MX_lightmap is missing'));
+  if (count === 0) failures.push(where('no node has MX_lightmap'));
+
+  // TEXCOORD_1 only where a lightmap uses it, and everywhere one does.
+  meshes.forEach((mesh, m) => {
+    const users = lightmapUsers.get(m);
+    mesh.primitives.forEach((p, i) => {
+      const has = p.attributes && p.attributes.TEXCOORD_1 !== undefined;
+      if (has && !users) {
+        const referencedBy = nodes.map((nd, n) => (nd.mesh === m ? `${n} ("${nd.name}")` : null)).filter(Boolean);
+        failures.push(where(`meshes[${m}] ("${mesh.name}").primitives[${i}].attributes.TEXCOORD_1: no node with ` +
+                            `MX_lightmap (texCoord 1) uses this mesh (nodes using it: ${referencedBy.join(', ') || 'none'})`));
+      }
+      if (!has && users)
+        failures.push(where(`meshes[${m}] ("${mesh.name}").primitives[${i}]: no TEXCOORD_1, but nodes ${users.join(', ')} lightmap it through texCoord 1`));
+    });
+  });
+
+  // Baked lights.
+  const lights = (json.extensions && json.extensions.KHR_lights_punctual &&
+                  json.extensions.KHR_lights_punctual.lights) || [];
+  const bakes = manifest.lights || [];
+  lights.forEach((light, l) => {
+    const entry = bakes.find((b) => b.lightIndex === l);
+    const baked = light.extras && light.extras.kiln && light.extras.kiln.baked;
+    const expected = entry ? entry.bakedDirect === true : undefined;
+    if (expected === undefined) failures.push(where(`KHR_lights_punctual.lights[${l}]: not in the manifest's lights`));
+    else if (baked !== expected)
+      failures.push(where(`KHR_lights_punctual.lights[${l}] ("${light.name}").extras.kiln.baked: ${baked}, expected ${expected} (manifest bakedDirect)`));
+  });
+  return failures;
+}
+
+// What the messages of one code point at, counted: "TEXCOORD_1 x 16, /textures x 1".
+function describePointers(list) {
+  const kinds = new Map();
+  for (const m of list) {
+    const p = m.pointer || '';
+    const attribute = /\/attributes\/(\w+)$/.exec(p);
+    const kind = attribute ? attribute[1] : p.replace(/\/\d+.*$/, '') || '(document)';
+    kinds.set(kind, (kinds.get(kind) || 0) + 1);
+  }
+  return [...kinds].map(([k, v]) => `${k} x ${v}`).join(', ');
+}
+
+const t0 = performance.now();
+const outputs = [];
+for (const entry of readdirSync(args.bakes).sort()) {
+  const dir = join(args.bakes, entry);
+  if (!statSync(dir).isDirectory()) continue;
+  for (const f of readdirSync(dir).sort())
+    if (f.endsWith('.gltf') || f.endsWith('.glb')) outputs.push({ dir, file: join(dir, f) });
+}
+if (outputs.length === 0) {
+  console.error(`FAILED: no .gltf or .glb in ${args.bakes}/*/: run tests/browser/bake_scenes.mjs first ` +
+                '(the CTest fixture browser_bakes does)');
+  process.exit(1);
+}
+
+let failures = 0;
+const infoTotals = new Map();
+for (const { dir, file } of outputs) {
+  const root = realpathSync(dir);
+  const bytes = readFileSync(file);
+  const outside = [];
+  const report = await validator.validateBytes(new Uint8Array(bytes), {
+    uri: file,
+    maxIssues: 0,
+    writeTimestamp: false,
+    externalResourceFunction: (uri) => new Promise((resolveData, reject) => {
+      let path;
+      try {
+        path = realpathSync(resolve(dir, decodeURIComponent(uri)));
+      } catch (e) {
+        reject(`${uri}: ${e.message}`);
+        return;
+      }
+      if (path !== root && !path.startsWith(root + sep)) {
+        outside.push(uri);
+        reject(`${uri} resolves outside the output folder ${dir}`);
+        return;
+      }
+      resolveData(new Uint8Array(readFileSync(path)));
+    }),
+  });
+  const issues = report.issues;
+  const byCode = new Map();
+  for (const m of issues.messages) {
+    const key = `${SEVERITY[m.severity]} ${m.code}`;
+    if (!byCode.has(key)) byCode.set(key, []);
+    byCode.get(key).push(m);
+  }
+  const ok = issues.numErrors === 0 && issues.numWarnings === 0 && outside.length === 0;
+  console.log(`${ok ? 'ok  ' : 'FAIL'} ${file}: ${issues.numErrors} errors, ${issues.numWarnings} warnings, ` +
+              `${issues.numInfos} infos, ${issues.numHints} hints (glTF-Validator ${report.validatorVersion})`);
+  for (const [key, list] of [...byCode].sort()) {
+    console.log(`     ${key} x ${list.length} (${describePointers(list)}): ${list[0].message}`);
+    if (key.startsWith('error') || key.startsWith('warning'))
+      for (const m of list) console.log(`       ${m.pointer || ''}: ${m.message}`);
+    infoTotals.set(key, (infoTotals.get(key) || 0) + list.length);
+  }
+  if (outside.length) console.log(`     URIs outside the folder: ${outside.join(', ')}`);
+  if (!ok) failures++;
+
+  // The extension against the manifest.
+  let json;
+  try {
+    json = file.endsWith('.glb') ? readGlbJson(bytes) : JSON.parse(bytes.toString('utf8'));
+  } catch (e) {
+    console.log(`FAIL ${file}: cannot read its JSON: ${e.message}`);
+    failures++;
+    continue;
+  }
+  const manifest = readJson(join(dir, 'manifest.json'));
+  const own = checkLightmaps(file, json, manifest, basename(dir).endsWith(ATLAS_UV_SUFFIX));
+  const lightmapped = (json.nodes || []).filter((n) => n.extensions && n.extensions.MX_lightmap).length;
+  const uv1 = (json.meshes || []).reduce((a, m) => a + m.primitives.filter((p) => p.attributes.TEXCOORD_1 !== undefined).length, 0);
+  if (own.length) {
+    failures++;
+    for (const f of own) console.log(`FAIL ${f}`);
+  } else {
+    console.log(`ok   ${file}: MX_lightmap on ${lightmapped} nodes agrees with manifest.json; ` +
+                `${uv1} primitives with TEXCOORD_1, each used by a lightmap`);
+  }
+}
+console.log('all outputs, by severity and code: ' +
+            ([...infoTotals].map(([k, v]) => `${k} x ${v}`).join(', ') || 'no issues'));
+console.log(`${outputs.length} outputs validated in ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+if (failures) {
+  console.error(`FAILED: ${failures} check(s) of ${outputs.length} outputs failed`);
+  process.exit(1);
+}
+console.log('PASSED');
