@@ -152,6 +152,10 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["denoise"] = s.denoise;
   j["stitchSeams"] = s.stitchSeams;
   j["ldr"] = ldrName(o.ldr);
+  // The output glTF's TEXCOORD_1 already holds the atlas UV (identity scale/offset there), and
+  // whether it is one .glb: a reader of the output glTF needs to know the first.
+  j["atlasUv"] = o.atlasUv;
+  j["glb"] = o.glb;
   j["value"] = "E/pi (outgoing radiance of a white Lambertian surface), linear";
   j["kilnVersion"] = o.kilnVersion;
   return j;

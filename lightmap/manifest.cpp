@@ -129,6 +129,10 @@ std::optional<std::string> readSettingsFields(const Json& s, ManifestSettingsFie
       return std::string("settings.shadowColor: expected 3 finite numbers");
     f.shadowColor = c;
   }
+  if (has("atlasUv")) {
+    if (!s["atlasUv"].is_boolean()) return std::string("settings.atlasUv: expected true or false");
+    f.atlasUv = s["atlasUv"].get<bool>();
+  }
   return std::nullopt;
 }
 

@@ -81,6 +81,9 @@ struct ManifestSettingsFields {
   std::optional<float> indirectIntensity;  // >= 0
   std::optional<LightingMode> lightingMode;
   std::optional<vec3> shadowColor;  // finite
+  // true: the output glTF's TEXCOORD_1 is the atlas UV (kiln bake --atlas-uv), so a reader of
+  // that glTF applies no scaleOffset (a reader of the input scene still does).
+  std::optional<bool> atlasUv;
 };
 
 struct ManifestStats {

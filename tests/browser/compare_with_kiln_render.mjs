@@ -103,14 +103,13 @@ for (const s of scenes) {
   jobs.push({ ...s, label: s.name, dir: bakeDir(args.bakes, s), file: outputOf(args.bakes, s) });
   const glbDir = join(args.bakes, `${s.name}_glb`);
   const glb = join(glbDir, s.scene.replace(/\.gltf$/, '.glb'));
-  if (existsSync(glb)) jobs.push({ ...s, label: `${s.name} (.glb)`, name: `${s.name}_glb`, dir: glbDir, file: glb });
-  // --atlas-uv: three.js reads the output (atlas UVs in TEXCOORD_1, identity transforms);
-  // kiln render reads the input scene with the bake's manifest, whose scaleOffset applies to
-  // the input's TEXCOORD_1 (the output's TEXCOORD_1 already holds the transform).
+  if (s === scenes[0]) jobs.push({ ...s, label: `${s.name} (.glb)`, name: `${s.name}_glb`, dir: glbDir, file: glb });
+  // --atlas-uv: both read the output glTF, whose TEXCOORD_1 holds the atlas UV (identity
+  // transforms in MX_lightmap; kiln render sees settings.atlasUv in the manifest).
   const atlasDir = join(args.bakes, `${s.name}${ATLAS_UV_SUFFIX}`);
-  if (existsSync(join(atlasDir, s.scene)))
+  if (s === scenes[0])
     jobs.push({ ...s, label: `${s.name} (--atlas-uv)`, name: `${s.name}${ATLAS_UV_SUFFIX}`, dir: atlasDir,
-                file: join(atlasDir, s.scene), kilnScene: join(scenesDir, s.scene) });
+                file: join(atlasDir, s.scene) });
 }
 for (const job of jobs)
   if (!fileExists(job.file)) {
@@ -147,7 +146,7 @@ try {
     const [w, h] = job.size;
     const kilnPng = join(out, 'kiln.png'), kilnExr = join(out, 'kiln.exr');
     // kiln render of the output glTF with its lightmaps folder.
-    const renderArgs = ['render', job.kilnScene || job.file, '--lightmaps', job.dir,
+    const renderArgs = ['render', job.file, '--lightmaps', job.dir,
                         '--look-from', job.from.join(','), '--look-at', job.at.join(','),
                         '--fov', String(job.fov), '--size', `${w},${h}`,
                         '--exposure', String(job.exposure), '--quiet',

@@ -110,19 +110,30 @@ function checkLightmaps(file, json, manifest, atlasUv) {
   if (count === 0) failures.push(where('no node has MX_lightmap'));
 
   // TEXCOORD_1 only where a lightmap uses it, and everywhere one does.
+  const passedThrough = [];
   meshes.forEach((mesh, m) => {
     const users = lightmapUsers.get(m);
     mesh.primitives.forEach((p, i) => {
       const has = p.attributes && p.attributes.TEXCOORD_1 !== undefined;
       if (has && !users) {
-        const referencedBy = nodes.map((nd, n) => (nd.mesh === m ? `${n} ("${nd.name}")` : null)).filter(Boolean);
-        failures.push(where(`meshes[${m}] ("${mesh.name}").primitives[${i}].attributes.TEXCOORD_1: no node with ` +
-                            `MX_lightmap (texCoord 1) uses this mesh (nodes using it: ${referencedBy.join(', ') || 'none'})`));
+        // Allowed only as the input's own data passed through: a mesh that only objects
+        // without a lightmap use (dynamic or scaleInLightmap 0: kiln leaves their authored
+        // TEXCOORD_1 alone), or that no node uses (an original kept beside its rebuilt copy).
+        const referencedBy = nodes.map((nd, n) => (nd.mesh === m ? n : null)).filter((n) => n !== null);
+        const lightmapped = referencedBy.filter((n) => (byNode.get(n) || {}).lightmapIndex >= 0);
+        if (lightmapped.length > 0)
+          failures.push(where(`meshes[${m}] ("${mesh.name}").primitives[${i}].attributes.TEXCOORD_1: ` +
+                              `lightmapped nodes ${lightmapped.join(', ')} use this mesh without MX_lightmap (texCoord 1)`));
+        else
+          passedThrough.push(`meshes[${m}] ("${mesh.name}").primitives[${i}] (nodes: ${referencedBy.join(', ') || 'none'})`);
       }
       if (!has && users)
         failures.push(where(`meshes[${m}] ("${mesh.name}").primitives[${i}]: no TEXCOORD_1, but nodes ${users.join(', ')} lightmap it through texCoord 1`));
     });
   });
+
+  if (passedThrough.length > 0)
+    console.log(`  ${file}: TEXCOORD_1 passed through from the input, no lightmap: ${passedThrough.join('; ')}`);
 
   // Baked lights.
   const lights = (json.extensions && json.extensions.KHR_lights_punctual &&

@@ -182,6 +182,13 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
     }
   }
 
+  // Rendering the output glTF of an --atlas-uv bake: its TEXCOORD_1 is already the atlas UV.
+  bool uv1IsAtlasUv = false;
+  if (s.atlasUv.value_or(false) && m.gltf) {
+    const fs::path output = fs::path(dir) / *m.gltf;
+    uv1IsAtlasUv = fs::exists(output, ec) && fs::equivalent(output, scene.path, ec) && !ec;
+  }
+
   // Objects, matched to the scene's mesh nodes.
   std::map<int, size_t> objectOfNode;
   for (size_t o = 0; o < scene.objects.size(); ++o) objectOfNode[scene.objects[o].nodeIndex] = o;
@@ -205,7 +212,7 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
     PreviewLightmapObject& entry = set.objects[o];
     entry.lightmapIndex = e.lightmapIndex;
     if (entry.lightmapIndex < 0) continue;
-    entry.scaleOffset = e.scaleOffset;
+    entry.scaleOffset = uv1IsAtlasUv ? vec4(1.0f, 1.0f, 0.0f, 0.0f) : e.scaleOffset;
     if (object.uv1.empty())
       return Error{element + ": node " + quoted(object.name) + " has a lightmap but no " +
                    "TEXCOORD_1 in " + scene.path + ": kiln generated its lightmap UVs, so " +
