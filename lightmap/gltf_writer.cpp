@@ -474,20 +474,6 @@ std::string encodeUriPath(const std::string& path) {
   return out;
 }
 
-std::string percentDecode(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) &&
-        std::isxdigit(uint8_t(s[i + 2]))) {
-      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += s[i];
-    }
-  }
-  return out;
-}
-
 std::string lowerCase(std::string s) {
   for (char& c : s) c = char(std::tolower(uint8_t(c)));
   return s;

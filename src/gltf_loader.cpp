@@ -55,20 +55,6 @@ std::string trim(std::string s) {
   return s;
 }
 
-std::string percentDecode(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) &&
-        std::isxdigit(uint8_t(s[i + 2]))) {
-      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += s[i];
-    }
-  }
-  return out;
-}
-
 bool isDataUri(const std::string& uri) { return uri.rfind("data:", 0) == 0; }
 
 uint32_t readU32(const uint8_t* p) {
@@ -1470,6 +1456,20 @@ class Loader {
 };
 
 }  // namespace
+
+std::string percentDecode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) &&
+        std::isxdigit(uint8_t(s[i + 2]))) {
+      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  return out;
+}
 
 std::optional<std::vector<uvec3>> gltfTriangles(std::span<const uint32_t> indices, int mode) {
   std::vector<uvec3> tris;

@@ -31,6 +31,10 @@ Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {}
 // accessors loadScene accepted: other component types are a programmer error.
 double readGltfComponent(const uint8_t* p, int componentType, bool normalized);
 
+// A glTF URI's percent-encoded bytes (RFC 3986 "%XX") decoded, for file access: the loader
+// reads, and the output glTF writer copies, "my%20texture.png" as "my texture.png".
+std::string percentDecode(const std::string& uri);
+
 // The triangles a primitive's vertex indices make in glTF `mode` (4 TRIANGLES, 5
 // TRIANGLE_STRIP, 6 TRIANGLE_FAN), in the primitive's own numbering and winding; nullopt for
 // points and lines.

@@ -22,6 +22,7 @@
 #include "src/image.h"
 #include "src/light_modes.h"
 #include "tests/test_util.h"
+#include "tests/unbaked_result.h"
 
 namespace kiln {
 namespace {
@@ -37,23 +38,7 @@ std::string cornellBox() { return test::scenesDir() + "/cornell_box.gltf"; }
 // object's rectangle holds (object index + 1, x, y) so that lookups can be checked exactly
 // (integers below 2048 survive half floats).
 LightmapBakeResult fakeResult(const Scene& scene, float resolution = 20.0f) {
-  LightmapBakeResult r;
-  r.scene = scene;
-  Result<std::vector<std::optional<UnwrapResult>>> uvs =
-      generateMissingLightmapUvs(r.scene, resolution);
-  EXPECT_TRUE(uvs.ok()) << uvs.error();
-  r.unwraps = *uvs;
-  AtlasSettings atlas;
-  atlas.resolution = resolution;
-  Result<AtlasLayout> layout = packAtlas(r.scene, atlas);
-  EXPECT_TRUE(layout.ok()) << layout.error();
-  r.layout = *layout;
-  for (const AtlasPage& p : r.layout.pages) {
-    LightmapPageResult page;
-    page.light = Image(p.width, p.height, 3);
-    page.valid.assign(size_t(p.width) * p.height, 0);
-    r.pages.push_back(std::move(page));
-  }
+  LightmapBakeResult r = test::unbakedResult(scene, resolution);
   for (size_t i = 0; i < r.layout.objects.size(); ++i) {
     const AtlasObject& o = r.layout.objects[i];
     if (o.lightmapIndex < 0) continue;

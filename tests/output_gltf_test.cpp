@@ -23,6 +23,7 @@
 #include "src/gltf_loader.h"
 #include "src/image.h"
 #include "tests/test_util.h"
+#include "tests/unbaked_result.h"
 
 namespace kiln {
 namespace {
@@ -50,25 +51,12 @@ std::vector<uint8_t> readFile(const std::string& path) {
 // every texel valid.
 template <class Fill>
 LightmapBakeResult fakeResult(const Scene& scene, Fill fill, float resolution = 20.0f) {
-  LightmapBakeResult r;
-  r.scene = scene;
-  Result<std::vector<std::optional<UnwrapResult>>> uvs =
-      generateMissingLightmapUvs(r.scene, resolution);
-  EXPECT_TRUE(uvs.ok()) << uvs.error();
-  r.unwraps = *uvs;
-  AtlasSettings atlas;
-  atlas.resolution = resolution;
-  Result<AtlasLayout> layout = packAtlas(r.scene, atlas);
-  EXPECT_TRUE(layout.ok()) << layout.error();
-  r.layout = *layout;
-  for (const AtlasPage& p : r.layout.pages) {
-    LightmapPageResult page;
-    page.light = Image(p.width, p.height, 3);
-    for (int y = 0; y < p.height; ++y)
-      for (int x = 0; x < p.width; ++x)
+  LightmapBakeResult r = test::unbakedResult(scene, resolution);
+  for (LightmapPageResult& page : r.pages) {
+    for (int y = 0; y < page.light.height; ++y)
+      for (int x = 0; x < page.light.width; ++x)
         for (int c = 0; c < 3; ++c) page.light.at(x, y)[c] = fill(x, y, c);
-    page.valid.assign(size_t(p.width) * p.height, 1);
-    r.pages.push_back(std::move(page));
+    page.valid.assign(page.valid.size(), 1);
   }
   return r;
 }
