@@ -449,6 +449,41 @@ TEST_F(RenderCliTest, RendersDeterministicallyAndCompares) {
   EXPECT_TRUE(fs::exists(d + "/same.png"));
 }
 
+// An --atlas-uv bake writes the atlas UV into the output glTF's TEXCOORD_1 and records
+// settings.atlasUv: rendering that output applies no scaleOffset, rendering the input scene
+// applies the manifest's, and both show the same lightmap texels. The Cornell box's own
+// TEXCOORD_1 makes the two UV paths differ only by float rounding of uv1 x s + o.
+TEST_F(RenderCliTest, AtlasUvOutputRendersLikeTheInputScene) {
+  const std::string& d = *dir_;
+  std::string out;
+  ASSERT_EQ(test::runCommand(std::string(test::kilnExe()) + " bake " + cornell() + " --out " + d +
+                                 "/atlas --preset preview --resolution 15 --atlas-uv --quiet",
+                             &out),
+            0)
+      << out;
+  const std::string view = " --lightmaps " + d + "/atlas --size 48,36 --quiet --linear ";
+  ASSERT_EQ(run(d + "/atlas/cornell_box.gltf" + view + d + "/output.exr --out " + d +
+                    "/output.png",
+                &out),
+            0)
+      << out;
+  ASSERT_EQ(run(cornell() + view + d + "/input.exr --out " + d + "/input.png", &out), 0) << out;
+  Result<Image> a = readImageFile(d + "/output.exr");
+  Result<Image> b = readImageFile(d + "/input.exr");
+  ASSERT_TRUE(a && b);
+  ASSERT_EQ(a->pixels.size(), b->pixels.size());
+  double sum = 0.0, diff = 0.0;
+  for (size_t i = 0; i < a->pixels.size(); ++i) {
+    sum += std::abs(b->pixels[i]);
+    diff += std::abs(double(a->pixels[i]) - double(b->pixels[i]));
+  }
+  ASSERT_GT(sum, 0.0);
+  // A scaleOffset applied twice moves every lookup by a chart's offset (tens of percent, as
+  // measured when the renderer ignored settings.atlasUv); float rounding moves it by ~1e-7 of
+  // a texel.
+  EXPECT_LT(diff / sum, 1e-4) << "mean |output - input| / mean input";
+}
+
 TEST_F(RenderCliTest, BadInputsNameTheFieldAndWriteNothing) {
   ASSERT_EQ(bakeCode_, 0) << *bakeOutput_;
   const std::string& d = *dir_;
