@@ -48,6 +48,8 @@ struct BakeOptions {
   int threads = 0;
   bool noDenoise = false;
   bool ao = false;
+  std::optional<float> aoAmount;    // --ao-amount: bakes AO and applies it to the light map
+  std::optional<float> aoDistance;  // --ao-distance: AO ray length, world units
   std::string ldr;
   std::string lockAtlas;
   std::string lightingMode;
@@ -212,6 +214,11 @@ int runBake(const BakeOptions& o) {
   settings.threads = o.threads;
   if (o.noDenoise) settings.denoise = false;
   if (o.ao) settings.ambientOcclusion = true;
+  if (o.aoAmount) {
+    settings.ambientOcclusion = true;
+    settings.aoAmount = *o.aoAmount;
+  }
+  if (o.aoDistance) settings.aoMaxDistance = *o.aoDistance;
 
   LightmapOutputSettings output;
   output.outDir = o.out;
@@ -306,6 +313,13 @@ void registerBakeCommand(CLI::App& app) {
       ->capture_default_str();
   b->add_flag("--no-denoise", o->noDenoise, "Skip the edge-aware denoiser");
   b->add_flag("--ao", o->ao, "Also bake ambient occlusion (lightmap-<i>_ao.exr)");
+  b->add_option("--ao-amount", o->aoAmount,
+                "Bake AO and apply it to the light map: light x (1 - A (1 - ao)), A in [0, 1] "
+                "(default: the scene's extras.kiln.aoAmount, else 0 = not applied)")
+      ->check(CLI::Range(0.0f, 1.0f));
+  b->add_option("--ao-distance", o->aoDistance,
+                "AO ray length in world units, > 0 (default: extras.kiln.aoMaxDistance, else 1)")
+      ->check(CLI::Range(1e-6f, 1e9f));
   b->add_option("--ldr", o->ldr,
                 "8-bit PNG pages, the output glTF's lightmap textures: dldr (default) or rgbm "
                 "(decode: docs)")
