@@ -18,6 +18,7 @@
 
 #include "lightmap/lightmap_baker.h"
 #include "probes/probe_baker.h"
+#include "probes/probe_placement.h"
 #include "src/gltf_loader.h"
 #include "src/integrator.h"
 #include "src/tracer.h"
@@ -192,6 +193,39 @@ TEST(StaticDynamic, DynamicBoxLeavesProbesBitIdentical) {
   EXPECT_EQ(a.validity[0], 1.0f);
   EXPECT_LT(c.validity[0], 0.5f);
   EXPECT_NE(a.sh[1].c[0], c.sh[1].c[0]);
+}
+
+// Automatic placement (candidates, relocation out of geometry, the cheap bakes that score
+// sets) puts the same probes with the dynamic box and without it; a static box changes them.
+TEST(StaticDynamic, DynamicBoxLeavesProbePlacementIdentical) {
+  ProbePlacementSettings s;
+  s.volumes = {Bounds3{vec3(-1.5f, 0.05f, -1.5f), vec3(1.5f, 1.5f, 1.5f)}};
+  s.budget = 24;
+  s.candidateRays = 128;
+  s.checkPoints = 64;
+  s.maxDepth = 1;
+  s.bake.bounces = 1;
+  s.bake.lightSamples = 1;
+  s.bake.visibilityResolution = 8;
+  auto place = [&](const Scene& scene) {
+    auto tracer = Tracer::create(scene);
+    EXPECT_TRUE(tracer.ok());
+    auto placed = placeProbes(scene, **tracer, s);
+    EXPECT_TRUE(placed.ok()) << placed.error();
+    std::vector<vec3> positions;
+    for (const PlacedProbe& p : placed->probes) positions.push_back(p.position);
+    return positions;
+  };
+  Scene without = groundScene();
+  addSunAndSky(without);
+  Scene dynamic = groundWithBox(false);
+  addSunAndSky(dynamic);
+  Scene control = groundWithBox(true);
+  addSunAndSky(control);
+  const std::vector<vec3> a = place(without), b = place(dynamic), c = place(control);
+  ASSERT_GE(a.size(), 4u);
+  EXPECT_EQ(a, b);
+  EXPECT_NE(a, c);
 }
 
 // The project's two_rooms scene has a dynamic box in room B: its lightmaps equal those of the
