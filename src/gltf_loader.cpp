@@ -1064,8 +1064,8 @@ class Loader {
     if (k == extras->end()) return;
     const std::string where = "scenes[" + std::to_string(std::max(sceneIndex, 0)) + "]";
     if (!k->is_object()) {
-      warn("extras.kiln", "root extras.kiln is ignored; put scene settings in " + where +
-                              ".extras.kiln");
+      warn("extras.kiln",
+           "root extras.kiln is ignored; put scene settings in " + where + ".extras.kiln");
       return;
     }
     std::string keys;

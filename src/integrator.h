@@ -121,8 +121,7 @@ class Integrator {
   struct MaterialTable;
   enum class ShadowKind { Any, Hard, Soft };
   // Helpers, defined and documented in integrator.cpp.
-  vec3 transmittance(vec3 origin, vec3 direction, float tMax,
-                     RayKind kind = RayKind::Any) const;
+  vec3 transmittance(vec3 origin, vec3 direction, float tMax, RayKind kind = RayKind::Any) const;
   vec3 visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_t firstIndex, uint32_t rays,
                     uint32_t dimension) const;
   vec3 punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, ShadowKind kind, uint64_t key,

@@ -323,8 +323,7 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene, TracerGeometr
     const bool noShadows = !obj.settings.castShadows;
     if (cutouts || blend || noShadows) rtcSetGeometryUserData(geom, &impl.geometryData[o]);
     if (cutouts || noShadows) rtcSetGeometryIntersectFilterFunction(geom, &intersectFilter);
-    if (cutouts || blend || noShadows)
-      rtcSetGeometryOccludedFilterFunction(geom, &occlusionFilter);
+    if (cutouts || blend || noShadows) rtcSetGeometryOccludedFilterFunction(geom, &occlusionFilter);
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl.rtcScene, geom, o);
     rtcReleaseGeometry(geom);  // the scene holds its own reference

@@ -162,10 +162,10 @@ TEST(StaticDynamic, DynamicBoxLeavesProbesBitIdentical) {
   addSunAndSky(dynamic);
   Scene control = groundWithBox(true);
   addSunAndSky(control);
-  const std::vector<vec3> positions = {
-      vec3(0.0f, 0.25f, 0.0f),  // inside the box
-      vec3(0.6f, 0.3f, 0.0f),  vec3(-0.6f, 0.3f, 0.1f), vec3(0.0f, 0.3f, 0.6f),
-      vec3(0.1f, 0.3f, -0.6f), vec3(0.0f, 1.2f, 0.0f),  vec3(0.3f, 0.9f, 0.3f)};
+  const std::vector<vec3> positions = {vec3(0.0f, 0.25f, 0.0f),  // inside the box
+                                       vec3(0.6f, 0.3f, 0.0f),  vec3(-0.6f, 0.3f, 0.1f),
+                                       vec3(0.0f, 0.3f, 0.6f),  vec3(0.1f, 0.3f, -0.6f),
+                                       vec3(0.0f, 1.2f, 0.0f),  vec3(0.3f, 0.9f, 0.3f)};
   ProbeBakeSettings settings;
   settings.rays = 1024;
   settings.bounces = 2;
@@ -184,7 +184,8 @@ TEST(StaticDynamic, DynamicBoxLeavesProbesBitIdentical) {
   ASSERT_EQ(b.sh.size(), positions.size());
   for (size_t i = 0; i < positions.size(); ++i)
     for (int k = 0; k < kShL2Count; ++k) {
-      EXPECT_EQ(a.sh[i].c[size_t(k)], b.sh[i].c[size_t(k)]) << "probe " << i << " coefficient " << k;
+      EXPECT_EQ(a.sh[i].c[size_t(k)], b.sh[i].c[size_t(k)])
+          << "probe " << i << " coefficient " << k;
     }
   EXPECT_EQ(a.validity, b.validity);
   EXPECT_EQ(a.visibility.maxDistance, b.visibility.maxDistance);
@@ -258,8 +259,10 @@ TEST(StaticDynamic, TwoRoomsDynamicBoxChangesNoTexel) {
 TEST(StaticDynamic, TracerGeometryAndShadowRays) {
   Scene scene = groundScene();
   const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
-  const uint32_t dyn = test::addBox(scene, "dynamic", vec3(-1.5f, 1, -0.5f), vec3(-0.5f, 2, 0.5f), m, false);
-  const uint32_t ghost = test::addBox(scene, "ghost", vec3(0.5f, 1, -0.5f), vec3(1.5f, 2, 0.5f), m, false);
+  const uint32_t dyn =
+      test::addBox(scene, "dynamic", vec3(-1.5f, 1, -0.5f), vec3(-0.5f, 2, 0.5f), m, false);
+  const uint32_t ghost =
+      test::addBox(scene, "ghost", vec3(0.5f, 1, -0.5f), vec3(1.5f, 2, 0.5f), m, false);
   scene.objects[dyn].settings.isStatic = false;
   scene.objects[ghost].settings.castShadows = false;
   auto baked = Tracer::create(scene);
@@ -366,10 +369,12 @@ ShadowStats measure(const LightmapBakeResult& r, const FloatingBox& f) {
       if (f.inShadow(p)) {
         ++st.shadowTexels;
         st.meanShadow += v;
-        st.maxShadowError = std::max(st.maxShadowError, double(std::abs(v - f.expected())) / f.expected());
+        st.maxShadowError =
+            std::max(st.maxShadowError, double(std::abs(v - f.expected())) / f.expected());
       } else if (p.y > 1.49f && std::abs(p.x) < 0.4f && std::abs(p.z) < 0.4f) {
         ++st.topTexels;
-        st.maxTopError = std::max(st.maxTopError, double(std::abs(v - f.expected())) / f.expected());
+        st.maxTopError =
+            std::max(st.maxTopError, double(std::abs(v - f.expected())) / f.expected());
       }
     }
   if (st.shadowTexels) st.meanShadow /= double(st.shadowTexels);
@@ -385,9 +390,10 @@ TEST(StaticDynamic, CastShadowsOffLetsTheSunThroughAndKeepsTheLightmap) {
   ASSERT_TRUE(ghost.ok()) << ghost.error();
 
   const ShadowStats on = measure(*casting, f), off = measure(*ghost, f);
-  std::printf("castShadows on: %zu shadow texels, mean %.4g; off: mean %.6g (expected %.6g), "
-              "max error %.2e\n",
-              on.shadowTexels, on.meanShadow, off.meanShadow, f.expected(), off.maxShadowError);
+  std::printf(
+      "castShadows on: %zu shadow texels, mean %.4g; off: mean %.6g (expected %.6g), "
+      "max error %.2e\n",
+      on.shadowTexels, on.meanShadow, off.meanShadow, f.expected(), off.maxShadowError);
   ASSERT_GT(on.shadowTexels, 20u);
   EXPECT_EQ(on.shadowTexels, off.shadowTexels);
   EXPECT_EQ(on.meanShadow, 0.0);  // the control: fully in the umbra, no indirect light
@@ -435,8 +441,9 @@ TEST(StaticDynamic, CastShadowsOffStillBouncesAndBlocksTheSky) {
   };
   const double g = meanUnder(*ghost), o = meanUnder(*none), o2 = meanUnder(*noneOtherSeed);
   const double noise = std::abs(o - o2);
-  std::printf("under the box: castShadows off %.5f, no box %.5f (other seed %.5f), sun alone %.5f\n",
-              g, o, o2, f.expected());
+  std::printf(
+      "under the box: castShadows off %.5f, no box %.5f (other seed %.5f), sun alone %.5f\n", g, o,
+      o2, f.expected());
   // Sun alone is a floor for all of them (direct is exact, the rest >= 0).
   EXPECT_GT(g, f.expected());
   EXPECT_GT(o, f.expected());
@@ -571,7 +578,8 @@ TEST(StaticDynamic, LoaderReadsTheSwitchesAndNamesUnknownKeys) {
   EXPECT_FALSE(s->lights[0].bakedShadows);
   const std::string t = std::to_string(nodeNamed(Json::parse(test::readTextFile(path)), "table_A"));
   for (const std::string& w : s->warnings) std::printf("warning: %s\n", w.c_str());
-  EXPECT_TRUE(hasWarning(*s, path + ": nodes[" + t + "].extras.kiln: unknown key 'castShadow' ignored"));
+  EXPECT_TRUE(
+      hasWarning(*s, path + ": nodes[" + t + "].extras.kiln: unknown key 'castShadow' ignored"));
   EXPECT_TRUE(hasWarning(*s, path + ": extensions.KHR_lights_punctual.lights[0].extras.kiln: "
                                     "unknown key 'bakedShadow' ignored"));
   EXPECT_TRUE(hasWarning(*s, path + ": scenes[0].extras.kiln: unknown key 'bounce' ignored"));
@@ -605,8 +613,9 @@ TEST(StaticDynamic, RootExtrasKilnIsReportedAsIgnored) {
   Result<Scene> s = loadScene(path);
   ASSERT_TRUE(s.ok()) << s.error();
   ASSERT_EQ(s->warnings.size(), 1u);
-  EXPECT_EQ(s->warnings[0], path + ": extras.kiln: root extras.kiln is ignored ('bounces', "
-                                   "'sky'); put scene settings in scenes[0].extras.kiln");
+  EXPECT_EQ(s->warnings[0], path +
+                                ": extras.kiln: root extras.kiln is ignored ('bounces', "
+                                "'sky'); put scene settings in scenes[0].extras.kiln");
   EXPECT_EQ(s->settings.bounces, std::optional<int>(3));  // the scene's, untouched
 
   // The key kiln bake writes there itself is no setting: no warning.
@@ -625,7 +634,8 @@ TEST(StaticDynamic, OwnOutputGltfLoadsWithoutWarnings) {
   const std::string dir = test::makeTempDir("kiln_static_dynamic");
   std::string output;
   const std::string cmd = std::string(test::kilnExe()) + " bake " + test::scenesDir() +
-                          "/two_rooms.gltf --out " + dir + "/out --preset preview --resolution 2 "
+                          "/two_rooms.gltf --out " + dir +
+                          "/out --preset preview --resolution 2 "
                           "--lighting-mode shadowmask 2>&1";
   ASSERT_EQ(test::runCommand(cmd, &output), 0) << output;
   std::string gltf;
