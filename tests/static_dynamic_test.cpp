@@ -3,7 +3,7 @@
 //     data: the lightmaps and probes of a scene with it are bit-identical to those of the same
 //     scene without it (the baking Tracer holds the same triangles, the atlas the same
 //     rectangles, and every random number is keyed by texel or probe and sample, never by
-//     what else the scene holds);
+//     what else the scene holds); probe placement puts the same probes;
 //   - castShadows false: the object stops no punctual light's shadow ray, yet is lightmapped,
 //     bounces light and blocks the sky;
 //   - bakedShadows false on a light: its baked light ignores occlusion;
