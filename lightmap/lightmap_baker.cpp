@@ -612,7 +612,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   if (cancelled(cancel)) return Error{"cancelled"};
   const std::vector<TexelRef> texels = coveredTexels(pages);
 
-  auto tracer = Tracer::create(result.scene);
+  // Static objects only: dynamic ones cast, bounce and emit nothing into the lightmaps.
+  auto tracer = Tracer::create(result.scene, TracerGeometry::BakedGI);
   if (!tracer) return Error{"lightmap bake: " + tracer.error()};
   std::atomic<uint64_t> rays{0};
 

@@ -1036,6 +1036,7 @@ class Loader {
     if (auto v = e.choice("receiveGI", {"lightmaps", "probes"}))
       settings->receiveGI = *v == "probes" ? ReceiveGI::Probes : ReceiveGI::Lightmaps;
     if (auto v = e.boolean("lppv")) settings->lppv = *v;
+    if (auto v = e.boolean("castShadows")) settings->castShadows = *v;
     e.find("lightmap");  // kiln bake writes it into its output glTF; a bake of that repacks
     if (const Json* p = e.find("probes")) {
       if (!p->is_array()) fail(e.where("probes"), "must be an array of [x, y, z] positions");
@@ -1053,7 +1054,30 @@ class Loader {
     e.warnUnknown(this);
   }
 
+  // kiln reads scene settings from the scene's extras.kiln, not from the root's. The root's
+  // holds only what kiln bake writes there ("lightmaps", the output glTF's list); anything
+  // else is a setting put in the wrong place: say where it belongs.
+  void checkRootExtras(int sceneIndex) {
+    auto extras = doc_.find("extras");
+    if (extras == doc_.end() || !extras->is_object()) return;
+    auto k = extras->find("kiln");
+    if (k == extras->end()) return;
+    const std::string where = "scenes[" + std::to_string(std::max(sceneIndex, 0)) + "]";
+    if (!k->is_object()) {
+      warn("extras.kiln",
+           "root extras.kiln is ignored; put scene settings in " + where + ".extras.kiln");
+      return;
+    }
+    std::string keys;
+    for (auto it = k->begin(); it != k->end(); ++it)
+      if (it.key() != "lightmaps") keys += std::string(keys.empty() ? "'" : ", '") + it.key() + "'";
+    if (!keys.empty())
+      warn("extras.kiln", "root extras.kiln is ignored (" + keys + "); put scene settings in " +
+                              where + ".extras.kiln");
+  }
+
   void convertSceneExtras(int sceneIndex) {
+    checkRootExtras(sceneIndex);
     std::string element = "scenes[" + std::to_string(sceneIndex) + "]";
     const Json* k = kilnExtras(array("scenes")[size_t(sceneIndex)], element);
     if (!k) return;
@@ -1148,6 +1172,7 @@ class Loader {
       if (auto v = x.number("shadowRadius", 0.0, 1e9, ">= 0")) l.shadowRadius = *v;
       if (auto v = x.number("shadowAngle", 0.0, 90.0, "in [0, 90] (degrees)")) l.shadowAngle = *v;
       if (auto v = x.integer("shadowSamples", 1, 65536, "in [1, 65536]")) l.shadowSamples = *v;
+      if (auto v = x.boolean("bakedShadows")) l.bakedShadows = *v;
       x.boolean("baked");  // kiln bake's mark in its output glTF, for viewers
       x.warnUnknown(this);
     }
