@@ -371,10 +371,13 @@ TEST_F(CliProgressTest, CtrlCExits130AndLeavesEarlierOutputsIntact) {
   const std::vector<Case> cases = {
       {{"probes", "bake", scene, "--rays", "16777216", "--out", dir + "/p.kprobe"},
        dir + "/p.kprobe"},
-      {{"probes", "place", scene, "--rays", "65536", "--budget", "100000", "--out",
+      {{"probes", "place", scene, "--volume", "0,0.1,0,2,2,2", "--rays", "65536", "--budget",
+        "100000", "--out",
         dir + "/positions.json"},
        dir + "/positions.json"},
-      {{"bake", scene, "--samples", "16777216", "--resolution", "8", "--out", dir + "/lm"},
+      // Cancellation is polled between chunks of 16 texels: 2^16 paths per texel keeps a
+      // chunk around a second while the whole bake would take minutes.
+      {{"bake", scene, "--samples", "65536", "--resolution", "32", "--out", dir + "/lm"},
        dir + "/lm/manifest.json"},
   };
   fs::create_directories(dir + "/lm");

@@ -99,6 +99,8 @@ int runLppv(const LppvOptions& o) {
     return kExitBadUsage;
   }
 
+  // Before any work: PREFIX's directory must take the files (PREFIX.klppv is the first).
+  if (int code = checkOutputFile("--out", o.out + ".klppv")) return code;
   Result<ProbeSet> set = loadProbeFile(o.file);
   if (!set) {
     printError(set.error());
