@@ -417,12 +417,29 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
   return done;
 }
 
+// Progress of stage 6's steps over all pages, in texels of the maps each step processes
+// (the light, then the shadowmask, direction and AO maps).
+struct PostProgress {
+  Progress denoise, fill, dilation, seams;
+  PostProgress(size_t denoised, size_t filled, size_t stitched, bool show)
+      : denoise("denoise", denoised, "texels", show && denoised > 0),
+        fill("fill", filled, "texels", show),
+        dilation("dilation", filled, "texels", show),
+        seams("seams", stitched, "texels", show && stitched > 0) {}
+  void finish() {
+    denoise.finish();
+    fill.finish();
+    dilation.finish();
+    seams.finish();
+  }
+};
+
 // Stage 6 for one page: denoise, fill invalid texels, dilate into padding, stitch seams.
 void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
               const RasterPage& raster,
               const std::vector<TexelRef>& texels,
               const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
-              bool withShadowmask, const ParallelOptions& parallel,
+              bool withShadowmask, const ParallelOptions& parallel, PostProgress& progress,
               LightmapPageResult& result, size_t& clampedTexels) {
   const int w = raster.width, h = raster.height;
   const size_t n = size_t(w) * size_t(h);
@@ -477,18 +494,35 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   fill.ringSeeds = &onVisible;
   DenoiseSettings denoiseSettings;
   denoiseSettings.parallel = parallel;
-  if (settings.denoise) denoise(page, denoiseSettings);
-  const std::vector<uint8_t> filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
+  // Each step runs inside its progress line's Busy, so the line's time is the step's own.
+  if (settings.denoise) {
+    auto busy = progress.denoise.busy();
+    denoise(page, denoiseSettings);
+    progress.denoise.advance(n);
+  }
+  std::vector<uint8_t> filled;
+  {
+    auto busy = progress.fill.busy();
+    filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
+    progress.fill.advance(n);
+  }
   // Rings enough to cover the gutters between objects (2 x padding) and between charts.
   const int rings = std::max(2, 2 * settings.padding);
-  const std::vector<uint8_t> mask = dilate(page.radiance, filled, rings, parallel);
+  std::vector<uint8_t> mask;
+  {
+    auto busy = progress.dilation.busy();
+    mask = dilate(page.radiance, filled, rings, parallel);
+    progress.dilation.advance(n);
+  }
   auto stitch = [&](Image& image, const std::vector<uint8_t>& imageMask) {
     if (!settings.stitchSeams) return;
+    auto busy = progress.seams.busy();
     for (size_t o = 0; o < scene.objects.size(); ++o) {
       if (layout.objects[o].lightmapIndex != int(pageIndex)) continue;
       const auto seams = findSeams(scene.objects[o], layout.objects[o].scaleOffset, w, h);
       if (!seams.empty()) (void)stitchSeams(image, imageMask, seams);
     }
+    progress.seams.advance(n);
   };
   stitch(page.radiance, mask);
   result.light = std::move(page.radiance);
@@ -503,8 +537,17 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
       if (page.objectId[t] < 0)
         for (int c = 0; c < 4; ++c)
           image->pixels[4 * t + c] = image == &shadowmask ? 1.0f : 0.5f;
-    const std::vector<uint8_t> f = fillInvalid(*image, page.valid, page.objectId, fill);
-    const std::vector<uint8_t> m = dilate(*image, f, rings, parallel);
+    std::vector<uint8_t> f, m;
+    {
+      auto busy = progress.fill.busy();
+      f = fillInvalid(*image, page.valid, page.objectId, fill);
+      progress.fill.advance(n);
+    }
+    {
+      auto busy = progress.dilation.busy();
+      m = dilate(*image, f, rings, parallel);
+      progress.dilation.advance(n);
+    }
     stitch(*image, m);
   }
   result.shadowmask = std::move(shadowmask);
@@ -512,14 +555,25 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
 
   if (!ao.empty()) {
     if (settings.denoise) {
+      auto busy = progress.denoise.busy();
       LightmapPage aoPage = page;  // guides; radiance replaced by the AO map
       aoPage.radiance = std::move(ao);
       aoPage.variance.clear();
       denoise(aoPage, denoiseSettings);
       ao = std::move(aoPage.radiance);
+      progress.denoise.advance(n);
     }
-    const std::vector<uint8_t> aoFilled = fillInvalid(ao, page.valid, page.objectId, fill);
-    (void)dilate(ao, aoFilled, rings, parallel);
+    std::vector<uint8_t> aoFilled;
+    {
+      auto busy = progress.fill.busy();
+      aoFilled = fillInvalid(ao, page.valid, page.objectId, fill);
+      progress.fill.advance(n);
+    }
+    {
+      auto busy = progress.dilation.busy();
+      (void)dilate(ao, aoFilled, rings, parallel);
+      progress.dilation.advance(n);
+    }
     // Applied after both maps are final, texel by texel, so that every texel of the written
     // pages satisfies light = light without AO x (1 - aoAmount (1 - ao)) (the factor is in
     // [1 - aoAmount, 1]: it cannot make a texel negative).
@@ -585,10 +639,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 1: UVs.
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
+  unwrap.showProgress = showProgress;
+  unwrap.cancel = cancel;
   auto unwraps = generateMissingLightmapUvs(result.scene, settings.resolution, unwrap);
+  if (cancelled(cancel)) return Error{"cancelled"};
   if (!unwraps) return Error{"lightmap UVs: " + unwraps.error()};
   result.unwraps = std::move(unwraps).value();
-  if (cancelled(cancel)) return Error{"cancelled"};
 
   // Stage 2: atlas.
   AtlasSettings atlas;
@@ -596,20 +652,27 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   atlas.padding = settings.padding;
   atlas.maxSize = settings.maxSize;
   atlas.locked = settings.lockedAtlas;
+  atlas.showProgress = showProgress;
+  atlas.cancel = cancel;
   auto layout = packAtlas(result.scene, atlas);
+  if (cancelled(cancel)) return Error{"cancelled"};
   if (!layout) return Error{"lightmap atlas: " + layout.error()};
   result.layout = std::move(layout).value();
   result.warnings = result.layout.warnings;
-  if (cancelled(cancel)) return Error{"cancelled"};
 
   // Stage 3: texels.
   RasterSettings raster;
   raster.supersampling = settings.supersampling;
   raster.parallel = parallel;
+  size_t rasterRows = 0;  // rasterizeAtlas runs in parallel over each page's rows
+  for (const AtlasPage& p : result.layout.pages) rasterRows += size_t(p.height);
+  Progress rasterProgress("rasterization", rasterRows, "rows", showProgress && rasterRows > 0);
+  raster.parallel.progress = &rasterProgress;
   auto rasterPages = rasterizeAtlas(result.scene, result.layout, raster);
-  if (!rasterPages) return Error{"lightmap texels: " + rasterPages.error()};
-  std::vector<RasterPage> pages = std::move(rasterPages).value();
   if (cancelled(cancel)) return Error{"cancelled"};
+  if (!rasterPages) return Error{"lightmap texels: " + rasterPages.error()};
+  rasterProgress.finish();
+  std::vector<RasterPage> pages = std::move(rasterPages).value();
   const std::vector<TexelRef> texels = coveredTexels(pages);
 
   // Static objects only: dynamic ones cast, bounce and emit nothing into the lightmaps.
@@ -657,12 +720,23 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
 
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());
+  size_t pageTexels = 0;
+  for (const RasterPage& p : pages) pageTexels += size_t(p.width) * size_t(p.height);
+  // Maps per step (postPage): light, shadowmask, direction and AO are filled and dilated;
+  // light and AO denoised; light, shadowmask and direction stitched.
+  const size_t extraMaps = size_t(withShadowmask) + size_t(settings.directional);
+  const size_t aoMaps = settings.ambientOcclusion ? 1 : 0;
+  PostProgress postProgress(settings.denoise ? pageTexels * (1 + aoMaps) : 0,
+                            pageTexels * (1 + extraMaps + aoMaps),
+                            settings.stitchSeams ? pageTexels * (1 + extraMaps) : 0,
+                            showProgress);
   for (uint32_t p = 0; p < pages.size(); ++p) {
     postPage(result.scene, result.layout, p, pages[p], texels, light, settings,
              withShadowmask,
-             parallel, result.pages[p], result.stats.clampedTexels);
+             parallel, postProgress, result.pages[p], result.stats.clampedTexels);
     if (cancelled(cancel)) return Error{"cancelled"};
   }
+  postProgress.finish();
 
   result.stats.texels = texels.size();
   for (const TexelLight& t : light) result.stats.invalidTexels += t.valid ? 0 : 1;

@@ -723,9 +723,27 @@ class Loader {
     if (gltfTexture < 0 || !options_.loadTextures) return -1;
     auto known = textureMap_.find(gltfTexture);
     if (known != textureMap_.end()) return known->second;
+    if (options_.cancel && options_.cancel->load()) fail("", "cancelled");
     int result = decodeTexture(gltfTexture);
     textureMap_[gltfTexture] = result;
+    if (options_.textureProgress) {
+      if (texturesUsed_ == 0) texturesUsed_ = countUsedTextures();
+      options_.textureProgress(textureMap_.size(), texturesUsed_);
+    }
     return result;
+  }
+
+  // How many distinct textures the materials use (what useTexture will decode), for progress.
+  size_t countUsedTextures() const {
+    std::vector<uint8_t> used(model_.textures.size(), 0);
+    auto mark = [&](int t) {
+      if (t >= 0 && size_t(t) < used.size()) used[size_t(t)] = 1;
+    };
+    for (const tinygltf::Material& m : model_.materials) {
+      mark(m.pbrMetallicRoughness.baseColorTexture.index);
+      mark(m.emissiveTexture.index);
+    }
+    return std::max<size_t>(1, size_t(std::count(used.begin(), used.end(), uint8_t(1))));
   }
 
   int decodeTexture(int t) {
@@ -1468,6 +1486,7 @@ class Loader {
 
   std::string path_;
   LoadOptions options_;
+  size_t texturesUsed_ = 0;  // countUsedTextures(), once, when progress is reported
   std::string baseDir_;
   std::vector<uint8_t> bytes_;
   bool isGlb_ = false;

@@ -25,8 +25,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr int kExitInterrupted = 130;  // 128 + SIGINT, as the shell reports it
-
 struct RenderOptions {
   std::string scene;
   std::string lightmaps;
@@ -47,6 +45,7 @@ struct RenderOptions {
   std::vector<std::string> compare;
   float diffScale = 4.0f;
   bool quiet = false;
+  SkyOptions sky;
 };
 
 // "X,Y,Z" -> three finite numbers.
@@ -168,8 +167,14 @@ int runRender(const RenderOptions& o) {
     return kExitBadUsage;
   }
 
+  // Before any work: a bad --out or sky fails now, not after the render.
+  if (int code = checkOutputFile("--out", o.out)) return code;
+  if (!o.linear.empty())
+    if (int code = checkOutputFile("--linear", o.linear)) return code;
+  std::optional<Sky> sky;
+  if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.quiet, sky, &scene)) return code;
 
   std::optional<LightmapSet> lightmaps;
   if (!o.lightmaps.empty()) {
@@ -237,7 +242,6 @@ int runRender(const RenderOptions& o) {
   settings.seed = o.seed;
   settings.threads = o.threads;
   settings.showProgress = !o.quiet;
-  installInterruptHandler();
   settings.cancel = &cancelFlag();
   if (!o.quiet)
     std::cerr << "kiln: rendering " << scene.path << " (" << o.mode << ", " << width << " x "
@@ -324,6 +328,7 @@ void registerRenderCommand(CLI::App& app) {
   r->add_option("--diff-scale", o->diffScale, "--compare: difference image = |A - B| x this")
       ->check(CLI::Range(1e-3f, 1e6f))
       ->capture_default_str();
+  addSkyOptions(r, o->sky);
   r->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
   r->callback(commandCallback([o]() { return o->compare.empty() ? runRender(*o) : runCompare(*o); }));
 }
