@@ -21,6 +21,7 @@ namespace kiln {
 struct LoadOptions {
   bool loadTextures = true;  // false: skip image decoding (materials use their factors)
   bool loadSkyMap = true;    // false: leave an equirectangular sky map unloaded
+  int scene = -1;            // the glTF scene to load; -1 = the file's default (`scene`, else 0)
 };
 
 Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {});

@@ -37,6 +37,7 @@ constexpr int kExitInterrupted = 130;
 
 struct BakeOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string out;
   std::string preset;
   std::optional<int> samples;
@@ -187,7 +188,7 @@ int runBake(const BakeOptions& o) {
     }
   }
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneOrReport(o.scene, LoadOptions{.scene = o.gltfScene}, &scene)) return code;
 
   LightmapBakeSettings settings;
   std::string preset = o.preset;
@@ -284,6 +285,8 @@ void registerBakeCommand(CLI::App& app) {
   CLI::App* b = app.add_subcommand(
       "bake", "Bake lightmaps: OpenEXR pages, manifest.json and a glTF that references them");
   b->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   b->add_option("--out,-o", o->out, "Output directory (created; files replaced atomically)")
       ->required();
   b->add_option("--preset", o->preset,

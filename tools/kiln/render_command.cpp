@@ -29,6 +29,7 @@ constexpr int kExitInterrupted = 130;  // 128 + SIGINT, as the shell reports it
 
 struct RenderOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string lightmaps;
   std::string probes;
   std::string probeBlend = "visibility";
@@ -169,7 +170,7 @@ int runRender(const RenderOptions& o) {
   }
 
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneOrReport(o.scene, LoadOptions{.scene = o.gltfScene}, &scene)) return code;
 
   std::optional<LightmapSet> lightmaps;
   if (!o.lightmaps.empty()) {
@@ -282,6 +283,8 @@ void registerRenderCommand(CLI::App& app) {
       "Render a PNG of the scene shaded from its lightmaps and probes (preview), or path traced "
       "(reference); or compare two images (--compare A B)");
   r->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)");
+  r->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   r->add_option("--lightmaps", o->lightmaps,
                 "Directory written by kiln bake (manifest.json + EXR pages)");
   r->add_option("--probes", o->probes, ".kprobe file (kiln probes bake) for dynamic objects");
