@@ -16,6 +16,9 @@
 
 #include <stb_image.h>
 #include <meshoptimizer.h>
+#ifdef KILN_HAVE_DRACO
+#include <draco/compression/decode.h>
+#endif
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -180,6 +183,7 @@ class Loader {
     precheck();
     runTinyGltf();
     decodeMeshopt();
+    decodeDraco();
     checkAccessors();
     convertMaterials();
     convertScene();
@@ -458,6 +462,11 @@ class Loader {
         const Json& p = (*prims)[j];
         if (!p.is_object()) fail(where, "must be an object");
         checkIndex(p, "indices", where, accessors.size(), "accessors");
+        // tinygltf refuses an indices accessor without a bufferView (Draco's have none): it
+        // gets a document without them, and they are put back after (runTinyGltf).
+        if (auto ix = p.find("indices"); ix != p.end() && accessors[ix->get<size_t>()].is_object() &&
+                                         !accessors[ix->get<size_t>()].contains("bufferView"))
+          viewlessIndices_.push_back({i, j, ix->get<int>()});
         checkIndex(p, "material", where, materials.size(), "materials");
         auto attrs = p.find("attributes");
         if (attrs == p.end() || !attrs->is_object())
@@ -716,6 +725,126 @@ class Loader {
       if (noDataBuffer_[i]) bufferLengths_[i] = model_.buffers[i].data.size();
   }
 
+  // ---- KHR_draco_mesh_compression --------------------------------------------------------------
+
+  // After tinygltf: each Draco-compressed primitive decoded; its accessors (which have no
+  // bufferView of their own) pointed at new buffers holding the decoded values, so that the
+  // rest of the loader reads plain accessors. Without Draco support in the build the extension
+  // is refused in extensionsRequired (kSupportedExtensions) and, when only used, the
+  // primitive's uncompressed fallback accessors are read.
+  void decodeDraco() {
+#ifdef KILN_HAVE_DRACO
+    const Json& meshes = array("meshes");
+    std::set<int> rewritten;
+    for (size_t m = 0; m < meshes.size(); ++m) {
+      const Json& prims = meshes[m]["primitives"];
+      for (size_t j = 0; j < prims.size(); ++j) {
+        auto ext = prims[j].find("extensions");
+        if (ext == prims[j].end() || !ext->is_object()) continue;
+        auto dr = ext->find("KHR_draco_mesh_compression");
+        if (dr == ext->end()) continue;
+        std::string element = "meshes[" + std::to_string(m) + "].primitives[" +
+                              std::to_string(j) + "].extensions.KHR_draco_mesh_compression";
+        decodeDracoPrimitive(*dr, model_.meshes[m].primitives[j], element, &rewritten);
+      }
+    }
+#endif
+  }
+
+#ifdef KILN_HAVE_DRACO
+  void decodeDracoPrimitive(const Json& dr, const tinygltf::Primitive& prim,
+                            const std::string& element, std::set<int>* rewritten) {
+    if (!dr.is_object()) fail(element, "must be an object");
+    if (!dr.contains("bufferView")) fail(element, "missing required 'bufferView'");
+    checkIndex(dr, "bufferView", element, model_.bufferViews.size(), "bufferViews");
+    auto attrs = dr.find("attributes");
+    if (attrs == dr.end() || !attrs->is_object())
+      fail(element, "missing required 'attributes' object");
+    const auto& view = model_.bufferViews[dr["bufferView"].get<size_t>()];
+    const auto& data = model_.buffers[size_t(view.buffer)].data;
+    if (view.byteOffset + view.byteLength > data.size())
+      fail(element, "bufferView runs past its buffer's data");
+    draco::DecoderBuffer in;
+    in.Init(reinterpret_cast<const char*>(data.data() + view.byteOffset), view.byteLength);
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodeMeshFromBuffer(&in);
+    if (!decoded.ok())
+      fail(element, "Draco could not decode the mesh: " + decoded.status().error_msg_string());
+    std::unique_ptr<draco::Mesh> mesh = std::move(decoded).value();
+    const size_t points = mesh->num_points(), faces = mesh->num_faces();
+    auto claim = [&](int accessor, const std::string& what, size_t count) {
+      std::string where = "accessors[" + std::to_string(accessor) + "]";
+      if (!rewritten->insert(accessor).second)
+        fail(where, "is used by more than one Draco-compressed primitive");
+      if (model_.accessors[size_t(accessor)].count != count)
+        fail(element, what + " (" + where + ") has count " +
+                          std::to_string(model_.accessors[size_t(accessor)].count) +
+                          ", the Draco mesh has " + std::to_string(count));
+    };
+    if (prim.indices >= 0) {
+      claim(prim.indices, "indices", 3 * faces);
+      std::vector<uint32_t> idx(3 * faces);
+      for (draco::FaceIndex f(0); f < mesh->num_faces(); ++f)
+        for (int c = 0; c < 3; ++c) idx[3 * f.value() + size_t(c)] = mesh->face(f)[c].value();
+      replaceAccessorData(prim.indices, idx.data(), idx.size() * 4,
+                          TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
+    } else if (faces > 0) {
+      fail(element, "the primitive has no 'indices' accessor for the Draco mesh's faces");
+    }
+    for (auto it = attrs->begin(); it != attrs->end(); ++it) {
+      std::string where = element + ".attributes." + it.key();
+      auto target = prim.attributes.find(it.key());
+      if (target == prim.attributes.end())
+        fail(where, "names an attribute the primitive does not have");
+      if (!it.value().is_number_integer()) fail(where, "must be a Draco attribute id");
+      const draco::PointAttribute* attr =
+          mesh->GetAttributeByUniqueId(uint32_t(it.value().get<int64_t>()));
+      if (!attr) fail(where, "no such attribute in the Draco mesh");
+      int accessor = target->second;
+      claim(accessor, it.key(), points);
+      const auto& a = model_.accessors[size_t(accessor)];
+      int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+      if (components <= 0 || components > 16) fail(where, "invalid accessor type");
+      // Integer attributes that are not normalized (JOINTS_n) keep their type; everything
+      // else becomes FLOAT (normalized values arrive in [0, 1] or [-1, 1]).
+      bool integer = !a.normalized && a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT;
+      std::vector<float> f(integer ? 0 : points * size_t(components));
+      std::vector<uint16_t> u(integer ? points * size_t(components) : 0);
+      for (draco::PointIndex p(0); p < mesh->num_points(); ++p) {
+        draco::AttributeValueIndex v = attr->mapped_index(p);
+        bool ok = integer ? attr->ConvertValue<uint16_t>(v, int8_t(components),
+                                                         &u[p.value() * size_t(components)])
+                          : attr->ConvertValue<float>(v, int8_t(components),
+                                                      &f[p.value() * size_t(components)]);
+        if (!ok) fail(where, "Draco could not convert point " + std::to_string(p.value()));
+      }
+      if (integer)
+        replaceAccessorData(accessor, u.data(), u.size() * 2,
+                            TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+      else
+        replaceAccessorData(accessor, f.data(), f.size() * 4, TINYGLTF_COMPONENT_TYPE_FLOAT);
+    }
+  }
+
+  void replaceAccessorData(int accessor, const void* bytes, size_t size, int componentType) {
+    tinygltf::Buffer b;
+    b.data.assign(static_cast<const uint8_t*>(bytes), static_cast<const uint8_t*>(bytes) + size);
+    model_.buffers.push_back(std::move(b));
+    bufferLengths_.push_back(size);
+    tinygltf::BufferView v;
+    v.buffer = int(model_.buffers.size() - 1);
+    v.byteOffset = 0;
+    v.byteLength = size;
+    model_.bufferViews.push_back(v);
+    tinygltf::Accessor& a = model_.accessors[size_t(accessor)];
+    a.bufferView = int(model_.bufferViews.size() - 1);
+    a.byteOffset = 0;
+    a.componentType = componentType;
+    a.normalized = false;
+    a.sparse.isSparse = false;
+  }
+#endif
+
   // ---- pass 3: tinygltf ---------------------------------------------------------------------
 
   void runTinyGltf() {
@@ -723,8 +852,9 @@ class Loader {
     gltf.SetImageLoader(&keepEncodedImage, nullptr);
     std::string err, warn;
     bool ok;
-    if (std::find(noDataBuffer_.begin(), noDataBuffer_.end(), true) != noDataBuffer_.end())
-      replaceNoDataBuffers();
+    if (std::find(noDataBuffer_.begin(), noDataBuffer_.end(), true) != noDataBuffer_.end() ||
+        !viewlessIndices_.empty())
+      rewriteForTinyGltf();
     if (isGlb_) {
       if (bytes_.size() > std::numeric_limits<unsigned int>::max())
         fail("", "file too large for tinygltf (4 GiB)");
@@ -740,14 +870,20 @@ class Loader {
     // tinygltf's own warnings are about images we report ourselves (per texture, with what
     // kiln does about it), so they are not repeated.
     if (!ok) fail("", "invalid glTF: " + trim(err.empty() ? "tinygltf failed" : err));
+    for (const ViewlessIndices& v : viewlessIndices_)
+      model_.meshes[v.mesh].primitives[v.primitive].indices = v.accessor;
     bytes_.clear();
     bytes_.shrink_to_fit();
   }
 
-  // tinygltf insists on data for every buffer: the document it parses gives each data-less
-  // meshopt fallback buffer one placeholder byte (decodeMeshopt redirects its views).
-  void replaceNoDataBuffers() {
+  // tinygltf insists on data for every buffer and on a bufferView for every indices accessor:
+  // the document it parses gives each data-less meshopt fallback buffer one placeholder byte
+  // (decodeMeshopt redirects its views) and leaves out indices without a bufferView (restored
+  // after it).
+  void rewriteForTinyGltf() {
     Json doc = doc_;
+    for (const ViewlessIndices& v : viewlessIndices_)
+      doc["meshes"][v.mesh]["primitives"][v.primitive].erase("indices");
     for (size_t i = 0; i < noDataBuffer_.size(); ++i)
       if (noDataBuffer_[i]) {
         doc["buffers"][i]["uri"] = "data:application/octet-stream;base64,AA==";
@@ -1952,6 +2088,11 @@ class Loader {
     MeshoptFilter filter = MeshoptFilter::None;
   };
   std::vector<MeshoptView> meshopt_;
+  struct ViewlessIndices {
+    size_t mesh = 0, primitive = 0;
+    int accessor = -1;
+  };
+  std::vector<ViewlessIndices> viewlessIndices_;
   std::set<size_t> isMeshoptView_;
   tinygltf::Model model_;
   std::map<int, int> textureMap_;
