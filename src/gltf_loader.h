@@ -30,6 +30,7 @@ struct LoadOptions {
   // Polled before each texture is decoded; when it becomes true loading stops with an Error
   // "cancelled" (Ctrl-C).
   const std::atomic<bool>* cancel = nullptr;
+  int scene = -1;            // the glTF scene to load; -1 = the file's default (`scene`, else 0)
 };
 
 Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {});

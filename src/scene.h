@@ -24,6 +24,7 @@ struct Material {
   vec4 baseColorFactor{1.0f};
   int baseColorTexture = -1;  // index into Scene::textures, -1 = none
   int baseColorTexCoord = 0;  // which UV set the texture uses (0 or 1)
+  TextureTransform baseColorTransform;  // KHR_texture_transform (also the cutout's alpha)
   float metallic = 1.0f;      // glTF defaults
   float roughness = 1.0f;
   AlphaMode alphaMode = AlphaMode::Opaque;
@@ -32,6 +33,7 @@ struct Material {
   vec3 emissiveFactor{0.0f};
   int emissiveTexture = -1;
   int emissiveTexCoord = 0;
+  TextureTransform emissiveTransform;
   float emissiveStrength = 1.0f;  // KHR_materials_emissive_strength
 
   bool isEmissive() const { return maxComponent(emissiveFactor) * emissiveStrength > 0.0f; }

@@ -34,6 +34,7 @@ using Json = nlohmann::json;
 
 struct BakeOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string out;
   std::string preset;
   std::optional<int> samples;
@@ -170,7 +171,7 @@ int runBake(const BakeOptions& o) {
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneForBake(o.scene, o.quiet, sky, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   LightmapBakeSettings settings;
   std::string preset = o.preset;
@@ -268,6 +269,8 @@ void registerBakeCommand(CLI::App& app) {
   CLI::App* b = app.add_subcommand(
       "bake", "Bake lightmaps: OpenEXR pages, manifest.json and a glTF that references them");
   b->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   b->add_option("--out,-o", o->out, "Output directory (created; files replaced atomically)")
       ->required();
   b->add_option("--preset", o->preset,

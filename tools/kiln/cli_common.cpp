@@ -42,10 +42,11 @@ int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene
   return kExitOk;
 }
 
-int loadSceneForBake(const std::string& path, bool quiet, const std::optional<Sky>& sky,
-                     Scene* scene) {
+int loadSceneForBake(const std::string& path, int gltfScene, bool quiet,
+                     const std::optional<Sky>& sky, Scene* scene) {
   installInterruptHandler();
   LoadOptions options;
+  options.scene = gltfScene;
   options.loadSkyMap = !sky;  // replaced anyway: do not read the scene's map
   options.cancel = &cancelFlag();
   std::unique_ptr<Progress> progress;  // made at the first texture, when the total is known

@@ -39,9 +39,9 @@ int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene
 // Same, for commands that run long: installs the Ctrl-C handler first, shows texture decoding
 // progress on stderr unless `quiet`, stops on Ctrl-C (returns kExitInterrupted, with a
 // message) and replaces the scene's sky by `sky` when given (the scene's own sky map is then
-// not loaded).
-int loadSceneForBake(const std::string& path, bool quiet, const std::optional<Sky>& sky,
-                     Scene* scene);
+// not loaded). `gltfScene` is the glTF scene to load (-1: the file's default; --scene).
+int loadSceneForBake(const std::string& path, int gltfScene, bool quiet,
+                     const std::optional<Sky>& sky, Scene* scene);
 
 // Prints "interrupted; <what> left untouched" and returns kExitInterrupted.
 int reportInterrupted(const std::string& what);

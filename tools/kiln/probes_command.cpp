@@ -53,6 +53,7 @@ Json shJson(const ShL2Rgb& sh) {
 
 struct BakeOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string positions;
   std::string out;
   int rays = 16384;
@@ -75,7 +76,7 @@ int runBake(const BakeOptions& o) {
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneForBake(o.scene, o.quiet, sky, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   std::vector<vec3> positions;
   if (!o.positions.empty()) {
@@ -424,6 +425,8 @@ void registerProbesCommand(CLI::App& app) {
   CLI::App* b = probes->add_subcommand(
       "bake", "Bake L2 radiance SH light probes at given positions into a .kprobe file");
   b->add_option("scene", bake->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--scene", bake->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   b->add_option("--positions", bake->positions,
                 "JSON file {\"positions\": [[x, y, z], ...]} (world space, metres); the scene's "
                 "probe groups (extras.kiln.probes) are added unless --no-scene-probes");

@@ -121,7 +121,7 @@ int runLppv(const LppvOptions& o) {
     // Bake the grid's samples directly as probes (one per sample, same order) instead of
     // interpolating the probe field: sharper where the probes are sparse, and costs a bake.
     Scene scene;
-    if (int code = loadSceneForBake(o.scene, o.quiet, std::nullopt, &scene)) return code;
+    if (int code = loadSceneForBake(o.scene, -1, o.quiet, std::nullopt, &scene)) return code;
     Result<std::unique_ptr<Tracer>> tracer = Tracer::create(scene);
     if (!tracer) {
       printError(scene.path + ": " + tracer.error());

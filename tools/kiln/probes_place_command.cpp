@@ -141,7 +141,7 @@ struct LoadedScene {
 int loadTraced(const CommonOptions& o, LoadedScene* out) {
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
-  if (int code = loadSceneForBake(o.scene, o.quiet, sky, &out->scene)) return code;
+  if (int code = loadSceneForBake(o.scene, -1, o.quiet, sky, &out->scene)) return code;
   const std::string& path = o.scene;
   Result<std::unique_ptr<Tracer>> tracer = Tracer::create(out->scene);
   if (!tracer) {

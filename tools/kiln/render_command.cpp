@@ -27,6 +27,7 @@ namespace fs = std::filesystem;
 
 struct RenderOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string lightmaps;
   std::string probes;
   std::string probeBlend = "visibility";
@@ -174,7 +175,7 @@ int runRender(const RenderOptions& o) {
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneForBake(o.scene, o.quiet, sky, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   std::optional<LightmapSet> lightmaps;
   if (!o.lightmaps.empty()) {
@@ -286,6 +287,8 @@ void registerRenderCommand(CLI::App& app) {
       "Render a PNG of the scene shaded from its lightmaps and probes (preview), or path traced "
       "(reference); or compare two images (--compare A B)");
   r->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)");
+  r->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   r->add_option("--lightmaps", o->lightmaps,
                 "Directory written by kiln bake (manifest.json + EXR pages)");
   r->add_option("--probes", o->probes, ".kprobe file (kiln probes bake) for dynamic objects");
