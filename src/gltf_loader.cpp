@@ -877,44 +877,9 @@ class Loader {
   }
 
   // tinygltf insists on data for every buffer and on a bufferView for every indices accessor:
-  // the document it parses gives each data-less meshopt fallback buffer one placeholder byte
-  // (decodeMeshopt redirects its views) and leaves out indices without a bufferView (restored
-  // after it).
-  void rewriteForTinyGltf() {
-    Json doc = doc_;
-    for (const ViewlessIndices& v : viewlessIndices_)
-      doc["meshes"][v.mesh]["primitives"][v.primitive].erase("indices");
-    for (size_t i = 0; i < noDataBuffer_.size(); ++i)
-      if (noDataBuffer_[i]) {
-        doc["buffers"][i]["uri"] = "data:application/octet-stream;base64,AA==";
-        doc["buffers"][i]["byteLength"] = 1;
-      }
-    for (const MeshoptView& m : meshopt_) doc["bufferViews"][m.view]["byteOffset"] = 0;
-    for (const MeshoptView& m : meshopt_) doc["bufferViews"][m.view]["byteLength"] = 1;
-    std::string json = doc.dump();
-    if (!isGlb_) {
-      bytes_.assign(json.begin(), json.end());
-      return;
-    }
-    // A .glb: the same BIN chunk behind the new JSON chunk.
-    while (json.size() % 4) json.push_back(' ');
-    std::vector<uint8_t> bin;
-    uint64_t binHeader = 20 + uint64_t(readU32(bytes_.data() + 12));
-    if (binHeader + 8 <= bytes_.size())
-      bin.assign(bytes_.begin() + long(binHeader), bytes_.begin() + long(binHeader + 8 + glbBinSize_));
-    std::vector<uint8_t> out(20);
-    auto put32 = [&](size_t at, uint32_t v) {
-      for (int k = 0; k < 4; ++k) out[at + size_t(k)] = uint8_t(v >> (8 * k));
-    };
-    std::memcpy(out.data(), "glTF", 4);
-    put32(4, 2);
-    put32(8, uint32_t(20 + json.size() + bin.size()));
-    put32(12, uint32_t(json.size()));
-    put32(16, 0x4E4F534Au);
-    out.insert(out.end(), json.begin(), json.end());
-    out.insert(out.end(), bin.begin(), bin.end());
-    bytes_ = std::move(out);
-  }
+  // it parses the document rewriteGltfForTinyGltf makes (the indices it leaves out are in
+  // viewlessIndices_ too, restored after it).
+  void rewriteForTinyGltf() { rewriteGltfForTinyGltf(doc_, &bytes_); }
 
   // ---- pass 4a: accessors ---------------------------------------------------------------------
 
@@ -2180,6 +2145,79 @@ std::optional<std::vector<uvec3>> gltfTriangles(std::span<const uint32_t> indice
     return std::nullopt;
   }
   return tris;
+}
+
+std::vector<GltfViewlessIndices> rewriteGltfForTinyGltf(const nlohmann::json& doc,
+                                                        std::vector<uint8_t>* bytes) {
+  const bool glb = bytes->size() >= 20 && std::memcmp(bytes->data(), "glTF", 4) == 0;
+  Json rewritten = doc;
+  std::vector<GltfViewlessIndices> viewless;
+  bool changed = false;
+  const Json empty = Json::array();
+  auto arrayOf = [&](const char* key) -> const Json& {
+    auto it = doc.find(key);
+    return it != doc.end() && it->is_array() ? *it : empty;
+  };
+  const Json &buffers = arrayOf("buffers"), &views = arrayOf("bufferViews"),
+             &accessors = arrayOf("accessors"), &meshes = arrayOf("meshes");
+  for (size_t m = 0; m < meshes.size(); ++m) {
+    if (!meshes[m].is_object() || !meshes[m].contains("primitives")) continue;
+    const Json& prims = meshes[m]["primitives"];
+    for (size_t j = 0; prims.is_array() && j < prims.size(); ++j) {
+      auto ix = prims[j].find("indices");
+      if (ix == prims[j].end() || !ix->is_number_unsigned() || ix->get<size_t>() >= accessors.size())
+        continue;
+      if (accessors[ix->get<size_t>()].is_object() &&
+          !accessors[ix->get<size_t>()].contains("bufferView")) {
+        viewless.push_back({m, j, ix->get<int>()});
+        rewritten["meshes"][m]["primitives"][j].erase("indices");
+        changed = true;
+      }
+    }
+  }
+  // Data-less buffers (loadScene accepts them only as EXT_meshopt_compression fallbacks).
+  for (size_t i = 0; i < buffers.size(); ++i)
+    if (buffers[i].is_object() && !buffers[i].contains("uri") && !(glb && i == 0)) {
+      rewritten["buffers"][i]["uri"] = "data:application/octet-stream;base64,AA==";
+      rewritten["buffers"][i]["byteLength"] = 1;
+      changed = true;
+    }
+  if (!changed) return viewless;
+  for (size_t i = 0; i < views.size(); ++i) {
+    auto ext = views[i].find("extensions");
+    if (views[i].is_object() && ext != views[i].end() && ext->is_object() &&
+        ext->contains("EXT_meshopt_compression")) {
+      rewritten["bufferViews"][i]["byteOffset"] = 0;
+      rewritten["bufferViews"][i]["byteLength"] = 1;
+    }
+  }
+  std::string json = rewritten.dump();
+  if (!glb) {
+    bytes->assign(json.begin(), json.end());
+    return viewless;
+  }
+  // A .glb: the same BIN chunk behind the new JSON chunk.
+  while (json.size() % 4) json.push_back(' ');
+  std::vector<uint8_t> bin;
+  const uint64_t binHeader = 20 + uint64_t(readU32(bytes->data() + 12));
+  if (binHeader + 8 <= bytes->size()) {
+    const uint64_t end = std::min<uint64_t>(binHeader + 8 + readU32(bytes->data() + binHeader),
+                                            bytes->size());
+    bin.assign(bytes->begin() + long(binHeader), bytes->begin() + long(end));
+  }
+  std::vector<uint8_t> out(20);
+  auto put32 = [&](size_t at, uint32_t v) {
+    for (int k = 0; k < 4; ++k) out[at + size_t(k)] = uint8_t(v >> (8 * k));
+  };
+  std::memcpy(out.data(), "glTF", 4);
+  put32(4, 2);
+  put32(8, uint32_t(20 + json.size() + bin.size()));
+  put32(12, uint32_t(json.size()));
+  put32(16, 0x4E4F534Au);
+  out.insert(out.end(), json.begin(), json.end());
+  out.insert(out.end(), bin.begin(), bin.end());
+  *bytes = std::move(out);
+  return viewless;
 }
 
 double readGltfComponent(const uint8_t* p, int componentType, bool normalized) {

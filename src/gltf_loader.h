@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <span>
 #include <string>
@@ -49,5 +50,20 @@ std::string percentDecode(const std::string& uri);
 // TRIANGLE_STRIP, 6 TRIANGLE_FAN), in the primitive's own numbering and winding; nullopt for
 // points and lines.
 std::optional<std::vector<uvec3>> gltfTriangles(std::span<const uint32_t> indices, int mode);
+
+// tinygltf insists on data for every buffer and on a bufferView for every indices accessor;
+// EXT_meshopt_compression (a fallback buffer without data) and KHR_draco_mesh_compression
+// (indices without a bufferView) allow neither. For a file loadScene accepted (`bytes`: the
+// whole .gltf or .glb; `doc`: its JSON), rewrites `bytes` into the document loadScene gives
+// tinygltf: each data-less buffer holds one placeholder byte, every meshopt-compressed
+// bufferView then covers byte 0 alone (nothing may read its values through tinygltf), and
+// indices accessors without a bufferView are left out of their primitives. Returns those left
+// out, to be put back into the parsed model; `bytes` is unchanged when nothing needs it.
+struct GltfViewlessIndices {
+  size_t mesh = 0, primitive = 0;
+  int accessor = -1;
+};
+std::vector<GltfViewlessIndices> rewriteGltfForTinyGltf(const nlohmann::json& doc,
+                                                        std::vector<uint8_t>* bytes);
 
 }  // namespace kiln
