@@ -13,6 +13,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <set>
@@ -39,11 +40,12 @@ uint32_t readU32(const uint8_t* p) {
 }
 
 // The document's JSON, from a .gltf or the JSON chunk of a .glb (the loader has validated the
-// file already; this only has to find the JSON again).
-Result<Json> readDocumentJson(const std::string& path, bool* glb) {
+// file already; this only has to find the JSON again). *bytes: the whole file.
+Result<Json> readDocumentJson(const std::string& path, bool* glb, std::vector<uint8_t>* bytesOut) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return Error{path + ": cannot open the file"};
-  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<uint8_t>& bytes = *bytesOut;
+  bytes.assign((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   *glb = bytes.size() >= 20 && std::memcmp(bytes.data(), "glTF", 4) == 0;
   const char* begin = reinterpret_cast<const char*>(bytes.data());
   size_t size = bytes.size();
@@ -74,7 +76,13 @@ bool keepEncodedImage(tinygltf::Image* image, const int, std::string*, std::stri
   return true;
 }
 
-// Raw access to a non-sparse accessor's elements.
+// A bufferView whose bytes are EXT_meshopt_compression-compressed: through tinygltf they are
+// not the values (rewriteGltfForTinyGltf even points them at a placeholder byte).
+bool compressedView(const tinygltf::BufferView& bv) {
+  return bv.extensions.count("EXT_meshopt_compression") != 0;
+}
+
+// Raw access to a non-sparse, uncompressed accessor's elements.
 struct AccessorView {
   const uint8_t* data = nullptr;
   size_t stride = 0, elemSize = 0, count = 0;
@@ -103,6 +111,7 @@ std::optional<AccessorView> viewAccessor(const tinygltf::Model& m, int index) {
   if (a.sparse.isSparse || a.bufferView < 0 || size_t(a.bufferView) >= m.bufferViews.size())
     return std::nullopt;
   const tinygltf::BufferView& bv = m.bufferViews[size_t(a.bufferView)];
+  if (compressedView(bv)) return std::nullopt;
   if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size()) return std::nullopt;
   const std::vector<unsigned char>& buf = m.buffers[size_t(bv.buffer)].data;
   AccessorView v;
@@ -155,6 +164,12 @@ std::vector<glm::dmat4> worldMatrices(const tinygltf::Model& m) {
   return world;
 }
 
+// A KHR_draco_mesh_compression primitive: its accessors have no bufferView, or hold an
+// uncompressed fallback that need not match the decoded vertices (their order, their count).
+bool dracoCompressed(const tinygltf::Primitive& prim) {
+  return prim.extensions.count("KHR_draco_mesh_compression") != 0;
+}
+
 // Where each of an Object's vertices came from, recomputed exactly as the loader builds the
 // Object: per primitive, triangles (lists, strips, fans), winding flipped under a mirroring
 // transform, triangles with non-finite or zero-area world positions dropped, and only the
@@ -175,6 +190,8 @@ std::optional<SourceMap> traceSources(const tinygltf::Model& m, const tinygltf::
   SourceMap map;
   for (size_t j = 0; j < mesh.primitives.size(); ++j) {
     const tinygltf::Primitive& prim = mesh.primitives[j];
+    // The loader's vertices are Draco's decoded ones, whatever the fallback accessors hold.
+    if (dracoCompressed(prim)) return std::nullopt;
     auto pos = prim.attributes.find("POSITION");
     if (pos == prim.attributes.end()) return std::nullopt;
     std::optional<AccessorView> pv = viewAccessor(m, pos->second);
@@ -646,16 +663,38 @@ class OutputGltfBuilder {
     if (options_.ldrPages.size() != result_.layout.pages.size() ||
         (options_.glb && options_.ldrPngs.size() != result_.layout.pages.size()))
       return Error{"the output glTF needs one LDR page per lightmap page"};
-    Result<Json> parsed = readDocumentJson(scenePath_, &inputIsGlb_);
+    std::vector<uint8_t> bytes;
+    Result<Json> parsed = readDocumentJson(scenePath_, &inputIsGlb_, &bytes);
     if (!parsed) return Error{parsed.error()};
     doc_ = std::move(parsed).value();
+    if (bytes.size() > std::numeric_limits<unsigned int>::max())
+      return Error{scenePath_ + ": file too large for tinygltf (4 GiB)"};
 
+    // The document as the loader gives it to tinygltf (compressed glTF: placeholders where
+    // tinygltf insists on data kiln does not read from it).
+    const std::vector<GltfViewlessIndices> viewless = rewriteGltfForTinyGltf(doc_, &bytes);
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(options_.glb ? keepEncodedImage : skipImage, nullptr);
     std::string err, warn;
-    const bool ok = inputIsGlb_ ? loader.LoadBinaryFromFile(&model_, &err, &warn, scenePath_)
-                                : loader.LoadASCIIFromFile(&model_, &err, &warn, scenePath_);
+    const std::string baseDir = fs::absolute(fs::path(scenePath_)).parent_path().string();
+    const bool ok =
+        inputIsGlb_
+            ? loader.LoadBinaryFromMemory(&model_, &err, &warn, bytes.data(),
+                                          static_cast<unsigned int>(bytes.size()), baseDir)
+            : loader.LoadASCIIFromString(&model_, &err, &warn,
+                                         reinterpret_cast<const char*>(bytes.data()),
+                                         static_cast<unsigned int>(bytes.size()), baseDir);
     if (!ok) return Error{scenePath_ + ": " + (err.empty() ? "cannot be read" : err)};
+    for (const GltfViewlessIndices& v : viewless)
+      model_.meshes[v.mesh].primitives[v.primitive].indices = v.accessor;
+    // Buffers the document gives no data (meshopt fallbacks): tinygltf holds a placeholder.
+    const Json& buffers = doc_.contains("buffers") && doc_["buffers"].is_array()
+                              ? doc_["buffers"] : Json::array();
+    for (size_t i = 0; i < buffers.size(); ++i)
+      if (buffers[i].is_object() && !buffers[i].contains("uri") && !(inputIsGlb_ && i == 0))
+        dataLessBuffers_.insert(i);
+    // The output shows the scene kiln baked (--scene).
+    if (result_.scene.gltfScene >= 0) doc_["scene"] = result_.scene.gltfScene;
     return Status::success();
   }
 
@@ -905,6 +944,11 @@ class OutputGltfBuilder {
     const Checkpoint mark = checkpoint();
     std::optional<Json> primitives = meshJson["primitives"];
     for (size_t j = 0; j < mesh.primitives.size() && primitives; ++j) {
+      // A Draco primitive's TEXCOORD_1 is the decoder's (a new accessor would not replace it).
+      if (dracoCompressed(mesh.primitives[j])) {
+        primitives.reset();
+        break;
+      }
       auto uv = mesh.primitives[j].attributes.find("TEXCOORD_1");
       if (uv == mesh.primitives[j].attributes.end()) continue;
       const int material = mesh.primitives[j].material;
@@ -1054,11 +1098,20 @@ class OutputGltfBuilder {
   }
 
   // .glb: one file: every buffer into the BIN chunk (each starting on 8 bytes, so that every
-  // accessor keeps its alignment), every bufferView moved onto buffer 0.
+  // accessor keeps its alignment), every bufferView (and EXT_meshopt_compression's compressed
+  // range) moved onto buffer 0. Buffers without data stay so, after it (buffers 1, 2, ...).
   Status mergeBuffersIntoChunk() {
-    std::vector<size_t> base;
+    constexpr size_t kKept = std::numeric_limits<size_t>::max();
+    std::vector<size_t> base, keptIndex;
     for (size_t b = 0; b < doc_["buffers"].size(); ++b) {
       const Json& buffer = doc_["buffers"][b];
+      keptIndex.push_back(0);
+      if (dataLessBuffers_.count(b)) {
+        keptBuffers_.push_back(buffer);
+        keptIndex.back() = keptBuffers_.size();
+        base.push_back(kKept);
+        continue;
+      }
       const size_t length = buffer.is_object() && buffer.contains("byteLength") &&
                                     buffer["byteLength"].is_number_integer() &&
                                     buffer["byteLength"].get<int64_t>() > 0
@@ -1074,15 +1127,27 @@ class OutputGltfBuilder {
       base.push_back(chunk_.size());
       chunk_.insert(chunk_.end(), data.begin(), data.begin() + long(length));
     }
+    // (kiln's own views hold signed integers, the parsed ones unsigned: both are integers)
+    auto move = [&](Json& range) {
+      if (!range.is_object() || !range.contains("buffer") || !range["buffer"].is_number_integer())
+        return;
+      const int64_t b = range["buffer"].get<int64_t>();
+      if (b < 0 || size_t(b) >= base.size()) return;  // the loader rejects it; left as it was
+      if (base[size_t(b)] == kKept) {
+        range["buffer"] = keptIndex[size_t(b)];
+        return;
+      }
+      range["buffer"] = 0;
+      range["byteOffset"] = base[size_t(b)] + range.value("byteOffset", size_t(0));
+    };
     for (Json& view : doc_["bufferViews"]) {
-      // (kiln's own views hold signed integers, the parsed ones unsigned: both are integers)
-      if (!view.is_object() || !view.contains("buffer") || !view["buffer"].is_number_integer())
-        continue;
-      const int64_t b = view["buffer"].get<int64_t>();
-      if (b < 0 || size_t(b) >= base.size()) continue;  // the loader rejects it; left as it was
-      view["buffer"] = 0;
-      view["byteOffset"] = base[size_t(b)] + view.value("byteOffset", size_t(0));
+      move(view);
+      if (view.is_object() && view.contains("extensions") && view["extensions"].is_object() &&
+          view["extensions"].contains("EXT_meshopt_compression"))
+        move(view["extensions"]["EXT_meshopt_compression"]);
     }
+    // Buffer 0 must exist for the kept ones to be 1, 2, ...
+    if (!keptBuffers_.empty() && chunk_.empty()) chunk_.resize(4, 0);
     return Status::success();
   }
 
@@ -1118,6 +1183,7 @@ class OutputGltfBuilder {
     while (chunk_.size() % 4) chunk_.push_back(0);
     doc_["buffers"] = Json::array();
     if (!chunk_.empty()) doc_["buffers"].push_back({{"byteLength", chunk_.size()}});
+    for (const Json& kept : keptBuffers_) doc_["buffers"].push_back(kept);
     dropEmptyArrays();
     std::string json = doc_.dump();
     while (json.size() % 4) json.push_back(' ');  // the JSON chunk is padded with spaces
@@ -1178,6 +1244,8 @@ class OutputGltfBuilder {
   bool lightmapUsed_ = false;         // some node got MX_lightmap
   std::set<int> warnedMaterials_;     // --atlas-uv and a material that reads TEXCOORD_1
   std::vector<uint8_t> chunk_;        // .glb: the BIN chunk
+  std::set<size_t> dataLessBuffers_;  // input buffers without data (meshopt fallbacks)
+  Json keptBuffers_ = Json::array();  // .glb: those buffers, after the BIN chunk's
 };
 
 }  // namespace

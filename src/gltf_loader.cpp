@@ -1283,6 +1283,7 @@ class Loader {
     if (options_.scene < 0 && sceneCount > 1)
       warn("scenes", "scene " + std::to_string(sceneIndex) + " of " + std::to_string(sceneCount) +
                          " loaded (the file's default); --scene N chooses another");
+    scene_.gltfScene = sceneIndex;
     if (sceneIndex >= 0) {
       roots = model_.scenes[size_t(sceneIndex)].nodes;
       for (int r : roots)

@@ -160,6 +160,7 @@ struct Scene {
   SceneSettings settings;
   Bounds3 bounds;  // of all object vertices
   std::vector<std::string> warnings;
+  int gltfScene = -1;  // the glTF scenes[] index loaded (-1: the file has no scenes)
 
   // Base colour (rgb) and alpha at a point of a triangle, given its barycentrics (b1, b2)
   // in Embree's convention (p = (1-b1-b2) p0 + b1 p1 + b2 p2): factor x texture at UV0.

@@ -1,7 +1,8 @@
 // output_gltf_test.cpp: the output glTF of `kiln bake` as engines load it
 // (docs/lightmap_outputs.md, "The output glTF"): the MX_lightmap extension on every
 // lightmapped node, its LDR page decoding to the EXR's values with the documented formula,
-// --atlas-uv, the self-contained output folder and --glb.
+// --atlas-uv, the self-contained output folder and --glb; compressed (EXT_meshopt_compression)
+// inputs and --scene.
 #include <gtest/gtest.h>
 #include <stb_image.h>
 
@@ -13,6 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <set>
+#include <array>
 #include <vector>
 
 #include "lightmap/atlas.h"
@@ -22,6 +24,7 @@
 #include "lightmap/uv_unwrap.h"
 #include "src/gltf_loader.h"
 #include "src/image.h"
+#include "tests/gltf_test_scenes.h"
 #include "tests/test_util.h"
 #include "tests/unbaked_result.h"
 
@@ -534,6 +537,156 @@ TEST(OutputGltf, OutputFolderIsSelfContainedAndGlbLoads) {
     EXPECT_EQ(a.objects[i].uv0, b.objects[i].uv0) << input.objects[i].name;
   }
   EXPECT_EQ(a.materials.size(), b.materials.size());
+}
+
+
+// ---- compressed inputs, --scene -----------------------------------------------------------------
+
+// Every triangle of a scene as its three world positions, rotated to start at its smallest
+// vertex (a rebuilt mesh may renumber vertices, never reorder a triangle's corners), sorted.
+std::vector<std::array<float, 9>> triangleSet(const Scene& s) {
+  std::vector<std::array<float, 9>> out;
+  for (const Object& o : s.objects)
+    for (const uvec3& t : o.triangles) {
+      std::array<vec3, 3> c = {o.positions[t.x], o.positions[t.y], o.positions[t.z]};
+      auto less = [](vec3 a, vec3 b) {
+        return std::array<float, 3>{a.x, a.y, a.z} < std::array<float, 3>{b.x, b.y, b.z};
+      };
+      int first = 0;
+      for (int k = 1; k < 3; ++k)
+        if (less(c[size_t(k)], c[size_t(first)])) first = k;
+      std::array<float, 9> tri;
+      for (int k = 0; k < 3; ++k)
+        for (int d = 0; d < 3; ++d) tri[size_t(3 * k + d)] = c[size_t((first + k) % 3)][d];
+      out.push_back(tri);
+    }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+void expectSameTriangles(const Scene& a, const Scene& b, const std::string& what) {
+  const auto x = triangleSet(a), y = triangleSet(b);
+  ASSERT_EQ(x.size(), y.size()) << what;
+  float worst = 0.0f;
+  for (size_t t = 0; t < x.size(); ++t)
+    for (size_t k = 0; k < 9; ++k) worst = std::max(worst, std::abs(x[t][k] - y[t][k]));
+  EXPECT_LE(worst, 1e-6f) << what;
+}
+
+bool manifestWarns(const std::string& outDir, const std::string& needle) {
+  const Json m = readJson(outDir + "/manifest.json");
+  for (const Json& w : m["warnings"])
+    if (w.get<std::string>().find(needle) != std::string::npos) return true;
+  return false;
+}
+
+// The meshopt Cornell box (a fallback buffer without data), without TEXCOORD_1 when
+// `dropUv1` (kiln generates lightmap UVs, so the writer rebuilds every mesh), as a .gltf.
+std::string writeMeshoptCornell(const std::string& dir, bool dropUv1, const std::string& name) {
+  const std::string src = test::writeMeshoptCornell(dir, false, false);
+  Json g = readJson(src);
+  EXPECT_FALSE(g["buffers"][1].contains("uri"));  // the data-less fallback
+  if (dropUv1)
+    for (Json& mesh : g["meshes"])
+      for (Json& p : mesh["primitives"]) p["attributes"].erase("TEXCOORD_1");
+  test::writeTextFile(dir + "/" + name + ".gltf", g.dump(1));
+  return dir + "/" + name + ".gltf";
+}
+
+// A meshopt-compressed input (whose fallback buffer has no data) gets an output glTF with the
+// input's triangles: meshes whose lightmap UVs kiln writes are rebuilt from the decoded
+// vertices (never from the compressed bytes), the others stay compressed.
+TEST(OutputGltf, MeshoptInputKeepsItsTriangles) {
+  const std::string dir = test::makeTempDir("output_gltf_meshopt");
+  for (bool dropUv1 : {false, true}) {
+    const std::string path = writeMeshoptCornell(dir, dropUv1, dropUv1 ? "no_uv1" : "uv1");
+    const Scene scene = load(path);
+    const LightmapBakeResult r = constantResult(scene);
+    for (bool atlasUv : {false, true})
+      for (bool glb : {false, true}) {
+        LightmapOutputSettings out;
+        out.outDir = dir + "/" + fs::path(path).stem().string() + (atlasUv ? "_atlas" : "") +
+                     (glb ? "_glb" : "");
+        out.atlasUv = atlasUv;
+        out.glb = glb;
+        const std::string what = out.outDir;
+        const Status st = writeLightmapOutputs(path, r, LightmapBakeSettings{}, out);
+        ASSERT_TRUE(st.ok()) << what << ": " << st.error();
+        const std::string file =
+            out.outDir + "/" + fs::path(path).stem().string() + (glb ? ".glb" : ".gltf");
+        const Scene back = load(file);
+        ASSERT_EQ(back.objects.size(), scene.objects.size()) << what;
+        expectSameTriangles(scene, back, what);
+        const Json m = readJson(out.outDir + "/manifest.json");
+        const bool rebuilt = dropUv1 || atlasUv;
+        EXPECT_EQ(manifestWarns(out.outDir, "could not be traced"), rebuilt) << what;
+        for (size_t i = 0; i < scene.objects.size(); ++i) {
+          const Object &in = r.scene.objects[i], &o = back.objects[i];
+          if (m["objects"][i]["lightmapIndex"].get<int>() < 0) continue;
+          // TEXCOORD_1 is there and is the bake's (atlas-transformed with --atlas-uv), per
+          // triangle corner (rebuilt meshes renumber their vertices).
+          ASSERT_EQ(o.uv1.size(), o.positions.size()) << what << " " << o.name;
+          ASSERT_EQ(o.triangles.size(), in.triangles.size()) << what << " " << o.name;
+          const Json& so = m["objects"][i]["scaleOffset"];
+          const vec4 t = atlasUv ? vec4(so[0].get<float>(), so[1].get<float>(),
+                                        so[2].get<float>(), so[3].get<float>())
+                                 : vec4(1, 1, 0, 0);
+          float worst = 0.0f;
+          for (size_t k = 0; k < in.triangles.size(); ++k)
+            for (int c = 0; c < 3; ++c) {
+              const vec2 want = in.uv1[in.triangles[k][c]] * vec2(t.x, t.y) + vec2(t.z, t.w);
+              const vec2 got = o.uv1[o.triangles[k][c]];
+              worst = std::max({worst, std::abs(got.x - want.x), std::abs(got.y - want.y)});
+            }
+          EXPECT_LE(worst, 1e-6f) << what << " " << o.name;
+        }
+        if (glb) continue;
+        // The compressed data and the data-less fallback buffer pass through as they were.
+        const Json g = readJson(file);
+        ASSERT_GE(g["buffers"].size(), 2u) << what;
+        EXPECT_FALSE(g["buffers"][1].contains("uri")) << what;
+        EXPECT_TRUE(g["buffers"][1]["extensions"]["EXT_meshopt_compression"]["fallback"]) << what;
+      }
+  }
+}
+
+// The same through the CLI, as `kiln bake` runs it: bake, write, load back.
+TEST(OutputGltf, CliBakesAMeshoptInputWithoutFallbackData) {
+  const std::string dir = test::makeTempDir("output_gltf_meshopt_cli");
+  const std::string path = writeMeshoptCornell(dir, true, "box");
+  std::string out;
+  ASSERT_EQ(kiln("bake \"" + path + "\" --preset preview --resolution 2 -q --out " + dir + "/out",
+                 &out),
+            0)
+      << out;
+  const Scene back = load(dir + "/out/box.gltf");
+  expectSameTriangles(load(path), back, "cli");
+  for (const Object& o : back.objects) EXPECT_EQ(o.uv1.size(), o.positions.size()) << o.name;
+}
+
+// --scene 1: the output's "scene" is the baked one, and the output loads as that scene.
+TEST(OutputGltf, OutputSceneIsTheBakedScene) {
+  const std::string dir = test::makeTempDir("output_gltf_scene");
+  Json g = readJson(writeMeshoptCornell(dir, true, "box"));
+  g["scenes"].insert(g["scenes"].begin(), Json{{"name", "floor only"}, {"nodes", {0}}});
+  g["scene"] = 0;  // the default is the one-node scene
+  test::writeTextFile(dir + "/two.gltf", g.dump(1));
+  const std::string path = dir + "/two.gltf";
+  Result<Scene> s = loadScene(path, LoadOptions{.scene = 1});
+  ASSERT_TRUE(s.ok()) << s.error();
+  ASSERT_GT(s->objects.size(), 1u);
+  for (bool glb : {false, true}) {
+    LightmapOutputSettings out;
+    out.outDir = dir + (glb ? "/glb" : "/gltf");
+    out.glb = glb;
+    const Status st = writeLightmapOutputs(path, constantResult(*s), LightmapBakeSettings{}, out);
+    ASSERT_TRUE(st.ok()) << st.error();
+    const std::string file = out.outDir + (glb ? "/two.glb" : "/two.gltf");
+    if (!glb) EXPECT_EQ(readJson(file)["scene"], 1);
+    const Scene back = load(file);  // its default scene
+    EXPECT_EQ(back.objects.size(), s->objects.size());
+    expectSameTriangles(*s, back, file);
+  }
 }
 
 }  // namespace
