@@ -1322,7 +1322,7 @@ class Loader {
     // World positions.
     std::vector<vec3> positions(vertexCount);
     for (size_t v = 0; v < vertexCount; ++v) {
-      vec3 p(float(pos[3 * v]), float(pos[3 * v + 1]), float(pos[3 * v + 2]));
+      vec3 p = vec3(float(pos[3 * v]), float(pos[3 * v + 1]), float(pos[3 * v + 2]));
       positions[v] = vec3(positionMatrix * vec4(p, 1.0f));
     }
     pos = {};
@@ -1404,7 +1404,7 @@ class Loader {
     std::vector<double> uv = readAccessor(accessor, 2, element + " " + name);
     out->resize(used.size());
     for (size_t v = 0; v < used.size(); ++v) {
-      vec2 t(float(uv[2 * used[v]]), float(uv[2 * used[v] + 1]));
+      vec2 t = vec2(float(uv[2 * used[v]]), float(uv[2 * used[v] + 1]));
       (*out)[v] = std::isfinite(t.x) && std::isfinite(t.y) ? t : vec2(0.0f);
     }
     return true;
