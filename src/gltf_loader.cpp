@@ -44,6 +44,8 @@ constexpr uint64_t kMaxImagePixels = 1ull << 26;  // 64 Mpixel: larger images ar
 // Accessor elements without a bufferView (docs/limits.md): per accessor and summed over every
 // read of such accessors in one file.
 constexpr uint64_t kMaxElementsWithoutData = 1ull << 24;
+// World-space coordinates of kept triangles, metres per axis (as for probe positions).
+constexpr float kMaxWorldCoordinate = 1e7f;
 const char* const kSupportedExtensions[] = {"KHR_lights_punctual",
                                             "KHR_materials_emissive_strength"};
 
@@ -1442,6 +1444,17 @@ class Loader {
         ++drops->nonFinite;
         continue;
       }
+      // Finite but far: Embree asserts on rays from beyond ~1.8e18, and float spacing there is
+      // kilometres anyway (a node translated by 1e20 aborted the bake).
+      for (vec3 q : {a, b, c})
+        if (glm::any(glm::greaterThan(glm::abs(q), vec3(kMaxWorldCoordinate))))
+        {
+          std::ostringstream where;
+          where << "a vertex lies at (" << q.x << ", " << q.y << ", " << q.z
+                << ") in world space, beyond " << kMaxWorldCoordinate
+                << " m from the origin on an axis (docs/limits.md)";
+          fail(element, where.str());
+        }
       // Zero area relative to the triangle's size (float cross products are noise below
       // ~1e-7 of the edge lengths squared), which also catches repeated indices.
       float maxEdge2 =
