@@ -943,24 +943,6 @@ class Loader {
                "nodes[" + std::to_string(c) + "] has more than one parent or is its own child");
         parent[size_t(c)] = int(i);
       }
-    // A cycle (0 -> 1 -> 0) gives every node in it a parent, so no root reaches it and it
-    // would vanish without a word: refuse it. One walk up the parents per unvisited node,
-    // stopping at nodes already walked, keeps this linear in the node count.
-    {
-      std::vector<size_t> walk(nodeCount, 0);  // 0 = not walked yet, else the walk's number
-      for (size_t i = 0; i < nodeCount; ++i) {
-        size_t j = i;
-        while (walk[j] == 0) {
-          walk[j] = i + 1;
-          if (parent[j] < 0) break;
-          j = size_t(parent[j]);
-        }
-        if (walk[j] == i + 1 && parent[j] >= 0)
-          fail("nodes[" + std::to_string(j) + "]",
-               "is part of a cycle of children (glTF nodes must form trees)");
-      }
-    }
-
     std::vector<int> roots;
     int sceneIndex = -1;
     if (model_.defaultScene >= 0)
@@ -977,6 +959,26 @@ class Loader {
     } else {
       for (size_t i = 0; i < nodeCount; ++i)
         if (parent[i] == -1) roots.push_back(int(i));
+    }
+
+    // A cycle (0 -> 1 -> 0) gives every node in it a parent, so no root reaches it and it
+    // would vanish without a word: say so. One walk up the parents per node, stopping at nodes
+    // already walked, keeps this linear in the node count. (A scene that lists a node of a
+    // cycle was refused above: it is not a root.)
+    {
+      std::vector<size_t> walk(nodeCount, 0);  // 0 = not walked yet, else the walk's number
+      for (size_t i = 0; i < nodeCount; ++i) {
+        size_t j = i;
+        while (walk[j] == 0) {
+          walk[j] = i + 1;
+          if (parent[j] < 0) break;
+          j = size_t(parent[j]);
+        }
+        if (walk[j] == i + 1 && parent[j] >= 0)
+          warn("nodes[" + std::to_string(j) + "]",
+               "is part of a cycle of children (glTF nodes must form trees): it and its "
+               "descendants are ignored");
+      }
     }
 
     // Depth-first, iteratively; with single parents and root starts this visits each node

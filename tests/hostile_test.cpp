@@ -252,9 +252,11 @@ TEST(HostileGenerated, InfoOnEveryCase) {
       {"indices_2pow64", {true, {"accessors[", "count"}}},
       {"indices_negative", {true, {"accessors[", "count"}}},
       {"accessor_neg_offset", {true, {"accessors[7].byteOffset", "must be an integer >= 0"}}},
-      {"cycle_2_no_scene", {true, {"nodes[", "cycle"}}},
-      {"cycle_2_in_scene", {true, {"nodes["}}},
-      {"cycle_self", {true, {"nodes[1]"}}},
+      // Without scenes every parentless node is a root, so a cycle is reached by none: a
+      // warning says it is ignored. In a scene's list, a node of a cycle is no root: refused.
+      {"cycle_2_no_scene", {false, {"nodes[", "cycle", "ignored"}, true}},
+      {"cycle_2_in_scene", {true, {"scenes[0].nodes", "is not a root"}}},
+      {"cycle_self", {true, {"nodes[1]", "its own child"}}},
       {"two_parents", {true, {"nodes["}}},
       {"png_100k", {false, {"textures[0]", "too large", "100000x100000"}, true}},
       {"png_4k_x40", {false, {}, true}},
