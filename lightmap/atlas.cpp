@@ -10,6 +10,7 @@
 
 #include "lightmap/manifest.h"
 #include "lightmap/skyline_packer.h"
+#include "src/progress.h"
 
 namespace kiln {
 
@@ -194,7 +195,10 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   for (uint32_t j : packingOrder(sortKey)) remaining.push_back(lightmapped[j]);
   const std::vector<glm::ivec2> candidates = pageSizes(settings.maxSize);
   std::vector<glm::ivec2> corners(scene.objects.size());
+  Progress progress("atlas", lightmapped.size(), "objects",
+                    settings.showProgress && !lightmapped.empty());
   while (!remaining.empty()) {
+    if (settings.cancel && settings.cancel->load()) return Error{"cancelled"};
     SkylinePacker packer(settings.maxSize - p, settings.maxSize - p);
     std::vector<uint32_t> members, rest;
     for (uint32_t i : remaining) {
@@ -223,7 +227,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
           scaleOffsetFor(bounds[i].first, bounds[i].second, ao.texelMin, ao.texelSize, page);
     }
     remaining = std::move(rest);
+    progress.advance(members.size());
   }
+  progress.finish();
   // Pages are powers of two, so they may exceed the objects' area (up to about 4x).
   if (Status budget = checkTexelBudget(layout.pages, "lightmap pages"); !budget)
     return Error{budget.error()};

@@ -12,6 +12,7 @@
 // the rasterizer is conservative, so border texels partly covered still get samples.
 #pragma once
 
+#include <atomic>
 #include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <string>
@@ -60,6 +61,10 @@ struct AtlasSettings {
   // When set, packAtlas checks it against the scene and returns it instead of packing
   // (--lock-atlas: several lightmap sets of one scene stay interchangeable).
   std::optional<AtlasLayout> locked;
+  // A progress line on stderr ("atlas", in objects placed), and a flag polled between pages
+  // that stops packing with an Error "cancelled".
+  bool showProgress = false;
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // Whether an object gets a lightmap: static, scaleInLightmap > 0 and receiveGI = lightmaps

@@ -575,288 +575,316 @@ Json* kilnExtras(Json& element) {
   return &extras["kiln"];
 }
 
-}  // namespace
+// Builds the output glTF of one bake; buildOutputGltf runs it. The stages run in the order of
+// run(), which is part of the output: it fixes the indices of everything appended (images,
+// textures, samplers, accessors, bufferViews, meshes, lights) and the order of the warnings.
+class OutputGltfBuilder {
+ public:
+  OutputGltfBuilder(const std::string& scenePath, const LightmapBakeResult& result,
+                    const Json& lightmaps, const OutputGltfOptions& options)
+      : scenePath_(scenePath),
+        result_(result),
+        lightmaps_(lightmaps),
+        options_(options),
+        rgbm_(options.ldr == LdrEncoding::Rgbm) {}
 
-double lightmapIntensity(LdrEncoding encoding) {
-  return encoding == LdrEncoding::Rgbm ? std::numbers::pi : 2.0 * std::numbers::pi;
-}
-
-Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapBakeResult& result,
-                                   const Json& lightmaps, const OutputGltfOptions& options) {
-  if (options.ldr == LdrEncoding::None)
-    return Error{"the output glTF needs the LDR pages (its lightmap textures)"};
-  if (options.ldrPages.size() != result.layout.pages.size() ||
-      (options.glb && options.ldrPngs.size() != result.layout.pages.size()))
-    return Error{"the output glTF needs one LDR page per lightmap page"};
-  bool glb = false;
-  Result<Json> parsed = readDocumentJson(scenePath, &glb);
-  if (!parsed) return Error{parsed.error()};
-  Json doc = std::move(parsed).value();
-
-  tinygltf::Model model;
-  {
-    tinygltf::TinyGLTF loader;
-    loader.SetImageLoader(options.glb ? keepEncodedImage : skipImage, nullptr);
-    std::string err, warn;
-    const bool ok = glb ? loader.LoadBinaryFromFile(&model, &err, &warn, scenePath)
-                        : loader.LoadASCIIFromFile(&model, &err, &warn, scenePath);
-    if (!ok) return Error{scenePath + ": " + (err.empty() ? "cannot be read" : err)};
+  Result<OutputGltf> run() {
+    if (Status s = readInput(); !s) return Error{s.error()};
+    if (Status s = planOutputNames(); !s) return Error{s.error()};
+    makeSelfContained();
+    addRootLightmaps();
+    prepareAppendedArrays();
+    addLightmapTextures();
+    countMeshUsers();
+    for (size_t i = 0; i < result_.scene.objects.size(); ++i)
+      if (Status s = editObject(i); !s) return Error{s.error()};
+    listLightmapExtension();
+    markBakedLights();
+    addUvBuffer();
+    if (options_.glb) {
+      if (Status s = mergeBuffersIntoChunk(); !s) return Error{s.error()};
+      embedImages();
+      if (Status s = writeGlbContainer(); !s) return Error{s.error()};
+    } else {
+      writeGltfText();
+    }
+    return std::move(out_);
   }
 
-  OutputGltf out;
-  const fs::path input(scenePath);
-  const std::string stem = input.stem().string();
-  out.fileName = stem + (options.glb ? ".glb" : ".gltf");
-  std::error_code ec;
-  const fs::path inputDir = fs::weakly_canonical(fs::absolute(input).parent_path(), ec);
-  const fs::path outputDir = fs::weakly_canonical(fs::absolute(fs::path(options.outDir)), ec);
-  const fs::path inputFile = fs::weakly_canonical(fs::absolute(input), ec);
-  if (inputFile == outputDir / out.fileName)
-    return Error{scenePath + ": the output glTF " + (outputDir / out.fileName).string() +
-                 " would overwrite the input scene; choose another output directory"};
-  const std::string glbChunkName = stem + ".bin", uvBufferName = stem + "_lightmap_uv.bin";
-
-  // Self-contained output: every file the document references is copied into the output
-  // directory (a .glb output embeds them later); data: URIs stay.
-  if (!doc.contains("buffers") || !doc["buffers"].is_array()) doc["buffers"] = Json::array();
-  if (!doc.contains("images") || !doc["images"].is_array()) doc["images"] = Json::array();
+ private:
+  // A buffer or image of the document that references a file (copied or embedded).
   struct FileRef {
     Json* element;
     std::string where;
     fs::path source;   // canonical
     fs::path wanted;   // the URI, decoded
   };
-  std::vector<FileRef> refs;
-  auto collect = [&](Json& element, const std::string& where) {
+
+  // One baked Object's node and how its lightmap UVs are written.
+  struct ObjectEdit {
+    size_t index;  // in result.scene.objects (and result.layout.objects, result.unwraps)
+    const Object& object;
+    Json& node;
+    std::string where;  // "nodes[i] 'name'", for messages
+    bool lightmapped;
+    vec4 uvTransform;  // applied to the TEXCOORD_1 written
+    vec4 nodeSo;       // the node's scale/offset
+  };
+
+  // How far the accessors, bufferViews and new bytes reach: a partial rebuild is dropped back
+  // to it.
+  struct Checkpoint {
+    size_t bytes, accessors, views;
+  };
+
+  // Checks the options and reads the input twice: its JSON (edited and written out) and,
+  // through tinygltf, its buffers (the mesh data to rebuild from; the images' encoded bytes
+  // too for a .glb output).
+  Status readInput() {
+    if (options_.ldr == LdrEncoding::None)
+      return Error{"the output glTF needs the LDR pages (its lightmap textures)"};
+    if (options_.ldrPages.size() != result_.layout.pages.size() ||
+        (options_.glb && options_.ldrPngs.size() != result_.layout.pages.size()))
+      return Error{"the output glTF needs one LDR page per lightmap page"};
+    Result<Json> parsed = readDocumentJson(scenePath_, &inputIsGlb_);
+    if (!parsed) return Error{parsed.error()};
+    doc_ = std::move(parsed).value();
+
+    tinygltf::TinyGLTF loader;
+    loader.SetImageLoader(options_.glb ? keepEncodedImage : skipImage, nullptr);
+    std::string err, warn;
+    const bool ok = inputIsGlb_ ? loader.LoadBinaryFromFile(&model_, &err, &warn, scenePath_)
+                                : loader.LoadASCIIFromFile(&model_, &err, &warn, scenePath_);
+    if (!ok) return Error{scenePath_ + ": " + (err.empty() ? "cannot be read" : err)};
+    return Status::success();
+  }
+
+  // The output's file names, and the input and output folders the copied files are placed
+  // between. The output must not replace the input scene.
+  Status planOutputNames() {
+    const fs::path input(scenePath_);
+    const std::string stem = input.stem().string();
+    out_.fileName = stem + (options_.glb ? ".glb" : ".gltf");
+    std::error_code ec;
+    inputDir_ = fs::weakly_canonical(fs::absolute(input).parent_path(), ec);
+    outputDir_ = fs::weakly_canonical(fs::absolute(fs::path(options_.outDir)), ec);
+    inputFile_ = fs::weakly_canonical(fs::absolute(input), ec);
+    if (inputFile_ == outputDir_ / out_.fileName)
+      return Error{scenePath_ + ": the output glTF " + (outputDir_ / out_.fileName).string() +
+                   " would overwrite the input scene; choose another output directory"};
+    glbChunkName_ = stem + ".bin";
+    uvBufferName_ = stem + "_lightmap_uv.bin";
+    return Status::success();
+  }
+
+  // Self-contained output: every file the document references is copied into the output
+  // directory (a .glb output embeds them later); data: URIs stay.
+  void makeSelfContained() {
+    if (!doc_.contains("buffers") || !doc_["buffers"].is_array()) doc_["buffers"] = Json::array();
+    if (!doc_.contains("images") || !doc_["images"].is_array()) doc_["images"] = Json::array();
+    for (size_t i = 0; i < doc_["buffers"].size(); ++i)
+      collectFileRef(doc_["buffers"][i], "buffers[" + std::to_string(i) + "]");
+    for (size_t i = 0; i < doc_["images"].size(); ++i)
+      collectFileRef(doc_["images"][i], "images[" + std::to_string(i) + "]");
+    if (!options_.glb) placeFiles();
+  }
+
+  // Records `element`'s URI when it names an existing file; warns about other URIs (kept).
+  void collectFileRef(Json& element, const std::string& where) {
     if (!element.is_object() || !element.contains("uri") || !element["uri"].is_string()) return;
     const std::string uri = element["uri"].get<std::string>();
     if (uri.rfind("data:", 0) == 0) return;
     if (uri.find("://") != std::string::npos) {
-      out.warnings.push_back(scenePath + ": " + where + ": '" + uri +
-                             "' is not a file; the output references it as it is");
+      out_.warnings.push_back(scenePath_ + ": " + where + ": '" + uri +
+                              "' is not a file; the output references it as it is");
       return;
     }
     const fs::path decoded = fs::path(percentDecode(uri));
     std::error_code e;
-    const fs::path source = fs::weakly_canonical(inputDir / decoded, e);
+    const fs::path source = fs::weakly_canonical(inputDir_ / decoded, e);
     if (e || !fs::is_regular_file(source, e)) {
-      out.warnings.push_back(scenePath + ": " + where + ": file '" + uri +
-                             "' not found; its URI is kept as it was");
+      out_.warnings.push_back(scenePath_ + ": " + where + ": file '" + uri +
+                              "' not found; its URI is kept as it was");
       return;
     }
-    refs.push_back({&element, where, source, decoded});
-  };
-  for (size_t i = 0; i < doc["buffers"].size(); ++i)
-    collect(doc["buffers"][i], "buffers[" + std::to_string(i) + "]");
-  for (size_t i = 0; i < doc["images"].size(); ++i)
-    collect(doc["images"][i], "images[" + std::to_string(i) + "]");
-  if (!options.glb) {
-    std::set<fs::path> sources = {inputFile};
-    for (const FileRef& r : refs) sources.insert(r.source);
-    std::vector<std::string> reserved = options.reservedNames;
-    reserved.insert(reserved.end(), {out.fileName, uvBufferName});
-    if (glb) reserved.push_back(glbChunkName);
-    reserved.insert(reserved.end(), options.ldrPages.begin(), options.ldrPages.end());
-    ResourcePlacer placer(outputDir, reserved, sources);
+    fileRefs_.push_back({&element, where, source, decoded});
+  }
+
+  // A .gltf output: names every referenced file in the output directory (ResourcePlacer),
+  // rewrites the URIs and lists the copies; a .glb input's binary chunk becomes a file.
+  void placeFiles() {
+    std::set<fs::path> sources = {inputFile_};
+    for (const FileRef& r : fileRefs_) sources.insert(r.source);
+    std::vector<std::string> reserved = options_.reservedNames;
+    reserved.insert(reserved.end(), {out_.fileName, uvBufferName_});
+    if (inputIsGlb_) reserved.push_back(glbChunkName_);
+    reserved.insert(reserved.end(), options_.ldrPages.begin(), options_.ldrPages.end());
+    ResourcePlacer placer(outputDir_, reserved, sources);
     std::set<std::string> copied;
-    for (FileRef& r : refs) {
+    for (FileRef& r : fileRefs_) {
       bool inPlace = false;
       const std::string name = placer.place(r.source, r.wanted, &inPlace);
       (*r.element)["uri"] = encodeUriPath(name);
-      if (!inPlace && copied.insert(name).second) out.copies.push_back({name, r.source.string()});
+      if (!inPlace && copied.insert(name).second) out_.copies.push_back({name, r.source.string()});
     }
     // A .glb input's binary chunk becomes a file.
-    if (glb && !doc["buffers"].empty() && doc["buffers"][0].is_object() &&
-        !doc["buffers"][0].contains("uri") && !model.buffers.empty()) {
-      out.binaries.push_back({glbChunkName, std::vector<uint8_t>(model.buffers[0].data.begin(),
-                                                                 model.buffers[0].data.end())});
-      doc["buffers"][0]["uri"] = encodeUriPath(glbChunkName);
+    if (inputIsGlb_ && !doc_["buffers"].empty() && doc_["buffers"][0].is_object() &&
+        !doc_["buffers"][0].contains("uri") && !model_.buffers.empty()) {
+      out_.binaries.push_back({glbChunkName_, std::vector<uint8_t>(model_.buffers[0].data.begin(),
+                                                                   model_.buffers[0].data.end())});
+      doc_["buffers"][0]["uri"] = encodeUriPath(glbChunkName_);
     }
   }
 
-  // Lightmaps on the root and on every lightmapped node.
-  if (Json* k = kilnExtras(doc)) {
-    (*k)["lightmaps"] = lightmaps;
-  } else {
-    out.warnings.push_back(scenePath + ": extras is not an object; the output glTF does not "
-                                       "list the lightmaps (see manifest.json)");
+  // Lightmaps on the root (the manifest's "lightmaps" array: EXR pages and mixed-lighting
+  // data stay there); the lightmapped nodes get theirs in markLightmappedNode.
+  void addRootLightmaps() {
+    if (Json* k = kilnExtras(doc_)) {
+      (*k)["lightmaps"] = lightmaps_;
+    } else {
+      out_.warnings.push_back(scenePath_ +
+                              ": extras is not an object; the output glTF does not "
+                              "list the lightmaps (see manifest.json)");
+    }
   }
-  if (!doc.contains("nodes") || !doc["nodes"].is_array()) doc["nodes"] = Json::array();
-  if (!doc.contains("accessors")) doc["accessors"] = Json::array();
-  if (!doc.contains("bufferViews")) doc["bufferViews"] = Json::array();
-  if (!doc.contains("meshes")) doc["meshes"] = Json::array();
-  if (!doc.contains("textures") || !doc["textures"].is_array()) doc["textures"] = Json::array();
-  if (!doc.contains("samplers") || !doc["samplers"].is_array()) doc["samplers"] = Json::array();
-  const int newBuffer = int(doc["buffers"].size());
-  BinaryBuilder bin(doc, newBuffer);
-  const std::vector<glm::dmat4> world = worldMatrices(model);
+
+  // The arrays the next stages append to, and the new buffer (after every input buffer) that
+  // receives the rebuilt meshes' data.
+  void prepareAppendedArrays() {
+    if (!doc_.contains("nodes") || !doc_["nodes"].is_array()) doc_["nodes"] = Json::array();
+    if (!doc_.contains("accessors")) doc_["accessors"] = Json::array();
+    if (!doc_.contains("bufferViews")) doc_["bufferViews"] = Json::array();
+    if (!doc_.contains("meshes")) doc_["meshes"] = Json::array();
+    if (!doc_.contains("textures") || !doc_["textures"].is_array())
+      doc_["textures"] = Json::array();
+    if (!doc_.contains("samplers") || !doc_["samplers"].is_array())
+      doc_["samplers"] = Json::array();
+    const int newBuffer = int(doc_["buffers"].size());
+    bin_.emplace(doc_, newBuffer);
+    world_ = worldMatrices(model_);
+  }
 
   // The lightmap textures: one image (the LDR PNG) and texture per page, one sampler.
-  const size_t firstLightmapImage = doc["images"].size();
-  if (!options.ldrPages.empty())
-    doc["samplers"].push_back({{"magFilter", 9729},   // LINEAR
-                             {"minFilter", 9729},   // LINEAR, no mipmaps
-                             {"wrapS", 33071},      // CLAMP_TO_EDGE
-                             {"wrapT", 33071},
-                             {"name", "kiln lightmap"}});
-  const size_t sampler = doc["samplers"].size() - 1;
-  std::vector<size_t> pageTexture;
-  for (size_t p = 0; p < options.ldrPages.size(); ++p) {
-    doc["images"].push_back({{"uri", encodeUriPath(options.ldrPages[p])},
-                             {"mimeType", "image/png"},
-                             {"name", "lightmap-" + std::to_string(p)}});
-    doc["textures"].push_back({{"sampler", sampler},
-                               {"source", doc["images"].size() - 1},
-                               {"name", "lightmap-" + std::to_string(p)}});
-    pageTexture.push_back(doc["textures"].size() - 1);
+  void addLightmapTextures() {
+    firstLightmapImage_ = doc_["images"].size();
+    if (!options_.ldrPages.empty())
+      doc_["samplers"].push_back({{"magFilter", 9729},  // LINEAR
+                                  {"minFilter", 9729},  // LINEAR, no mipmaps
+                                  {"wrapS", 33071},     // CLAMP_TO_EDGE
+                                  {"wrapT", 33071},
+                                  {"name", "kiln lightmap"}});
+    const size_t sampler = doc_["samplers"].size() - 1;
+    for (size_t p = 0; p < options_.ldrPages.size(); ++p) {
+      doc_["images"].push_back({{"uri", encodeUriPath(options_.ldrPages[p])},
+                                {"mimeType", "image/png"},
+                                {"name", "lightmap-" + std::to_string(p)}});
+      doc_["textures"].push_back({{"sampler", sampler},
+                                  {"source", doc_["images"].size() - 1},
+                                  {"name", "lightmap-" + std::to_string(p)}});
+      pageTexture_.push_back(doc_["textures"].size() - 1);
+    }
   }
-  const bool rgbm = options.ldr == LdrEncoding::Rgbm;
 
   // How many nodes use each mesh: a node's TEXCOORD_1 can only change in place when it is the
   // mesh's only user.
-  std::vector<int> meshUsers(doc["meshes"].size(), 0);
-  for (const Json& node : doc["nodes"])
-    if (node.is_object() && node.contains("mesh") && node["mesh"].is_number_integer()) {
-      const int64_t m = node["mesh"].get<int64_t>();
-      if (m >= 0 && size_t(m) < meshUsers.size()) ++meshUsers[size_t(m)];
-    }
-  bool lightmapUsed = false;
-  std::set<int> warnedMaterials;  // --atlas-uv and a material that reads TEXCOORD_1
+  void countMeshUsers() {
+    meshUsers_.assign(doc_["meshes"].size(), 0);
+    for (const Json& node : doc_["nodes"])
+      if (node.is_object() && node.contains("mesh") && node["mesh"].is_number_integer()) {
+        const int64_t m = node["mesh"].get<int64_t>();
+        if (m >= 0 && size_t(m) < meshUsers_.size()) ++meshUsers_[size_t(m)];
+      }
+  }
 
-  for (size_t i = 0; i < result.scene.objects.size(); ++i) {
-    const Object& o = result.scene.objects[i];
-    if (o.nodeIndex < 0 || size_t(o.nodeIndex) >= doc["nodes"].size() ||
-        size_t(o.nodeIndex) >= model.nodes.size())
-      return Error{scenePath + ": object '" + o.name + "' has no node " +
+  // One baked Object: its node's lightmap, then its node's mesh when kiln writes its
+  // TEXCOORD_1 (generated lightmap UVs, or --atlas-uv).
+  Status editObject(size_t i) {
+    const Object& o = result_.scene.objects[i];
+    if (o.nodeIndex < 0 || size_t(o.nodeIndex) >= doc_["nodes"].size() ||
+        size_t(o.nodeIndex) >= model_.nodes.size())
+      return Error{scenePath_ + ": object '" + o.name + "' has no node " +
                    std::to_string(o.nodeIndex)};
-    Json& node = doc["nodes"][size_t(o.nodeIndex)];
-    const std::string where = "nodes[" + std::to_string(o.nodeIndex) + "] '" + o.name + "'";
     const bool lightmapped =
-        i < result.layout.objects.size() && result.layout.objects[i].lightmapIndex >= 0;
-    const vec4 so = lightmapped ? result.layout.objects[i].scaleOffset : kIdentityUv;
+        i < result_.layout.objects.size() && result_.layout.objects[i].lightmapIndex >= 0;
+    const vec4 so = lightmapped ? result_.layout.objects[i].scaleOffset : kIdentityUv;
     // With atlasUv the transform moves into TEXCOORD_1 and the glTF's is identity.
-    const vec4 uvTransform = lightmapped && options.atlasUv ? so : kIdentityUv;
-    const vec4 nodeSo = lightmapped && options.atlasUv ? kIdentityUv : so;
-    if (lightmapped) {
-      const AtlasObject& a = result.layout.objects[i];
-      if (size_t(a.lightmapIndex) >= pageTexture.size())
-        return Error{where + ": lightmap " + std::to_string(a.lightmapIndex) + " has no page"};
-      if (Json* k = kilnExtras(node)) {
-        (*k)["lightmap"] = {{"index", a.lightmapIndex},
-                            {"scaleOffset", {nodeSo.x, nodeSo.y, nodeSo.z, nodeSo.w}}};
-      } else {
-        out.warnings.push_back(scenePath + ": " + where +
-                               ": extras is not an object; its lightmap is only in manifest.json");
-      }
-      if (!node.contains("extensions")) node["extensions"] = Json::object();
-      if (!node["extensions"].is_object()) {
-        out.warnings.push_back(scenePath + ": " + where + ": extensions is not an object; no " +
-                               kLightmapExtension);
-      } else {
-        node["extensions"][kLightmapExtension] = {
-            {"lightMapTexture", {{"index", pageTexture[size_t(a.lightmapIndex)]}, {"texCoord", 1}}},
-            {"scale", {nodeSo.x, nodeSo.y}},
-            {"offset", {nodeSo.z, nodeSo.w}},
-            {"intensity", lightmapIntensity(options.ldr)},
-            {"extras",
-             {{"kiln",
-               {{"page", a.lightmapIndex},
-                {"encoding", rgbm ? "rgbm" : "dldr"},
-                {"range", rgbm ? int(kRgbmRange) : int(kDldrRange)}}}}}};
-        lightmapUsed = true;
-      }
-    }
-    const bool generated = i < result.unwraps.size() && result.unwraps[i].has_value();
-    if (!generated && !(lightmapped && options.atlasUv)) continue;
+    const ObjectEdit e{i,
+                       o,
+                       doc_["nodes"][size_t(o.nodeIndex)],
+                       "nodes[" + std::to_string(o.nodeIndex) + "] '" + o.name + "'",
+                       lightmapped,
+                       lightmapped && options_.atlasUv ? so : kIdentityUv,
+                       lightmapped && options_.atlasUv ? kIdentityUv : so};
+    if (Status s = markLightmappedNode(e); !s) return s;
+    const bool generated = i < result_.unwraps.size() && result_.unwraps[i].has_value();
+    if (!generated && !(lightmapped && options_.atlasUv)) return Status::success();
+    return rebuildNodeMesh(e, generated);
+  }
 
-    const int meshIndex = model.nodes[size_t(o.nodeIndex)].mesh;
-    if (meshIndex < 0 || size_t(meshIndex) >= model.meshes.size())
-      return Error{scenePath + ": " + where + " has no mesh"};
-    const tinygltf::Mesh& mesh = model.meshes[size_t(meshIndex)];
-    const glm::dmat4& w = world[size_t(o.nodeIndex)];
-    const Json& meshJson = doc["meshes"][size_t(meshIndex)];
-    std::optional<Json> primitives;
-    const size_t mark = bin.bytes().size();
-    const size_t accessors = doc["accessors"].size(), views = doc["bufferViews"].size();
-    auto undo = [&]() {  // drops a partial rebuild
-      doc["accessors"].erase(doc["accessors"].begin() + long(accessors), doc["accessors"].end());
-      doc["bufferViews"].erase(doc["bufferViews"].begin() + long(views), doc["bufferViews"].end());
-      bin.bytes().resize(mark);
-    };
-
-    if (!generated) {
-      // atlasUv on the node's own TEXCOORD_1: a new accessor per primitive, everything else
-      // shared with the original mesh.
-      primitives = meshJson["primitives"];
-      for (size_t j = 0; j < mesh.primitives.size() && primitives; ++j) {
-        auto uv = mesh.primitives[j].attributes.find("TEXCOORD_1");
-        if (uv == mesh.primitives[j].attributes.end()) continue;
-        const int material = mesh.primitives[j].material;
-        if (material >= 0 && size_t(material) < model.materials.size() &&
-            doc.contains("materials") && doc["materials"].is_array() &&
-            size_t(material) < doc["materials"].size() &&
-            readsTexcoord1(doc["materials"][size_t(material)]) &&
-            warnedMaterials.insert(material).second)
-          out.warnings.push_back(scenePath + ": materials[" + std::to_string(material) +
-                                 "] samples a texture with TEXCOORD_1, which --atlas-uv turns "
-                                 "into atlas UVs");
-        std::optional<AccessorView> v = viewAccessor(model, uv->second);
-        if (!v || v->components != 2) {
-          primitives.reset();
-          break;
-        }
-        std::vector<float> values;
-        values.reserve(v->count * 2);
-        const size_t cs = v->elemSize / 2;
-        for (size_t k = 0; k < v->count; ++k) {
-          const vec2 t(float(readGltfComponent(v->element(k), v->componentType, v->normalized)),
-                       float(readGltfComponent(v->element(k) + cs, v->componentType,
-                                               v->normalized)));
-          const vec2 a = applyUvTransform(t, uvTransform);
-          values.insert(values.end(), {a.x, a.y});
-        }
-        (*primitives)[j]["attributes"]["TEXCOORD_1"] = bin.addFloats(values, 2, "VEC2", false);
-      }
-      if (primitives && meshUsers[size_t(meshIndex)] == 1) {
-        doc["meshes"][size_t(meshIndex)]["primitives"] = *primitives;  // its only user
-        continue;
-      }
-      if (!primitives) undo();
+  // A lightmapped node's extras.kiln.lightmap and its MX_lightmap extension (the shared
+  // contract, gltf_writer.h); an extras or extensions that is not an object is left alone
+  // with a warning.
+  Status markLightmappedNode(const ObjectEdit& e) {
+    if (!e.lightmapped) return Status::success();
+    Json& node = e.node;
+    const vec4 nodeSo = e.nodeSo;
+    const AtlasObject& a = result_.layout.objects[e.index];
+    if (size_t(a.lightmapIndex) >= pageTexture_.size())
+      return Error{e.where + ": lightmap " + std::to_string(a.lightmapIndex) + " has no page"};
+    if (Json* k = kilnExtras(node)) {
+      (*k)["lightmap"] = {{"index", a.lightmapIndex},
+                          {"scaleOffset", {nodeSo.x, nodeSo.y, nodeSo.z, nodeSo.w}}};
     } else {
-      // Generated UVs: a new mesh for this node alone.
-      const UnwrapResult& unwrap = *result.unwraps[i];
-      std::optional<SourceMap> src = traceSources(model, mesh, w);
-      // The trace must reproduce the loader's vertices: same triangle count, every new vertex
-      // at its source's world position (float rounding aside).
-      bool traced = src.has_value();
-      if (traced) {
-        size_t triangles = 0;
-        for (size_t t : src->primitiveTriangles) triangles += t;
-        traced = triangles == unwrap.triangles.size() &&
-                 unwrap.vertexRemap.size() == o.positions.size();
-        for (size_t v = 0; traced && v < unwrap.vertexRemap.size(); ++v) {
-          const uint32_t s = unwrap.vertexRemap[v];
-          if (s >= src->worldPositions.size()) {
-            traced = false;
-            break;
-          }
-          const vec3 d = src->worldPositions[s] - o.positions[v];
-          const float scale = 1.0f + maxComponent(glm::abs(o.positions[v]));
-          traced = maxComponent(glm::abs(d)) <= 1e-4f * scale;
-        }
+      out_.warnings.push_back(scenePath_ + ": " + e.where +
+                              ": extras is not an object; its lightmap is only in manifest.json");
+    }
+    if (!node.contains("extensions")) node["extensions"] = Json::object();
+    if (!node["extensions"].is_object()) {
+      out_.warnings.push_back(scenePath_ + ": " + e.where + ": extensions is not an object; no " +
+                              kLightmapExtension);
+    } else {
+      node["extensions"][kLightmapExtension] = {
+          {"lightMapTexture", {{"index", pageTexture_[size_t(a.lightmapIndex)]}, {"texCoord", 1}}},
+          {"scale", {nodeSo.x, nodeSo.y}},
+          {"offset", {nodeSo.z, nodeSo.w}},
+          {"intensity", lightmapIntensity(options_.ldr)},
+          {"extras",
+           {{"kiln",
+             {{"page", a.lightmapIndex},
+              {"encoding", rgbm_ ? "rgbm" : "dldr"},
+              {"range", rgbm_ ? int(kRgbmRange) : int(kDldrRange)}}}}}};
+      lightmapUsed_ = true;
+    }
+    return Status::success();
+  }
+
+  // The node's new TEXCOORD_1: --atlas-uv on its own TEXCOORD_1 changes the mesh in place
+  // when the node is its only user; otherwise the node gets a new mesh of its own (generated
+  // UVs: rebuilt from the original attributes, else from the baked Object).
+  Status rebuildNodeMesh(const ObjectEdit& e, bool generated) {
+    const Object& o = e.object;
+    const int meshIndex = model_.nodes[size_t(o.nodeIndex)].mesh;
+    if (meshIndex < 0 || size_t(meshIndex) >= model_.meshes.size())
+      return Error{scenePath_ + ": " + e.where + " has no mesh"};
+    const tinygltf::Mesh& mesh = model_.meshes[size_t(meshIndex)];
+    const glm::dmat4& w = world_[size_t(o.nodeIndex)];
+    const Json& meshJson = doc_["meshes"][size_t(meshIndex)];
+    std::optional<Json> primitives;
+    if (!generated) {
+      primitives = atlasUvPrimitives(e, mesh, meshJson);
+      if (primitives && meshUsers_[size_t(meshIndex)] == 1) {
+        doc_["meshes"][size_t(meshIndex)]["primitives"] = *primitives;  // its only user
+        return Status::success();
       }
-      if (traced) {
-        primitives = rebuildFromSources(model, meshJson, mesh, *src, unwrap,
-                                        glm::determinant(glm::dmat3(w)) < 0.0, uvTransform, bin);
-        if (!primitives) undo();
-      }
+    } else {
+      primitives = generatedUvPrimitives(e, mesh, meshJson, w);
     }
     if (!primitives) {
-      out.warnings.push_back(scenePath + ": " + where +
-                             ": the mesh's own vertex attributes could not be traced (sparse or "
-                             "compressed accessors); its lightmapped mesh was rebuilt from "
-                             "positions, normals and UVs only");
-      primitives = rebuildFromObject(o, w, model.materials.size(), uvTransform, bin);
+      out_.warnings.push_back(scenePath_ + ": " + e.where +
+                              ": the mesh's own vertex attributes could not be traced (sparse or "
+                              "compressed accessors); its lightmapped mesh was rebuilt from "
+                              "positions, normals and UVs only");
+      primitives = rebuildFromObject(o, w, model_.materials.size(), e.uvTransform, *bin_);
     }
     Json newMesh = meshJson;
     newMesh["primitives"] = *primitives;
@@ -864,95 +892,189 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
                            ? meshJson["name"].get<std::string>()
                            : "meshes[" + std::to_string(meshIndex) + "]") +
                       " (lightmap UVs of " + o.name + ")";
-    doc["meshes"].push_back(newMesh);
-    node["mesh"] = doc["meshes"].size() - 1;
+    doc_["meshes"].push_back(newMesh);
+    e.node["mesh"] = doc_["meshes"].size() - 1;
+    return Status::success();
   }
-  if (lightmapUsed) {
-    if (!doc.contains("extensionsUsed") || !doc["extensionsUsed"].is_array())
-      doc["extensionsUsed"] = Json::array();
-    Json& used = doc["extensionsUsed"];
+
+  // atlasUv on the node's own TEXCOORD_1: a new accessor per primitive, everything else
+  // shared with the original mesh. nullopt (nothing appended) when a TEXCOORD_1 cannot be
+  // read.
+  std::optional<Json> atlasUvPrimitives(const ObjectEdit& e, const tinygltf::Mesh& mesh,
+                                        const Json& meshJson) {
+    const Checkpoint mark = checkpoint();
+    std::optional<Json> primitives = meshJson["primitives"];
+    for (size_t j = 0; j < mesh.primitives.size() && primitives; ++j) {
+      auto uv = mesh.primitives[j].attributes.find("TEXCOORD_1");
+      if (uv == mesh.primitives[j].attributes.end()) continue;
+      const int material = mesh.primitives[j].material;
+      if (material >= 0 && size_t(material) < model_.materials.size() &&
+          doc_.contains("materials") && doc_["materials"].is_array() &&
+          size_t(material) < doc_["materials"].size() &&
+          readsTexcoord1(doc_["materials"][size_t(material)]) &&
+          warnedMaterials_.insert(material).second)
+        out_.warnings.push_back(scenePath_ + ": materials[" + std::to_string(material) +
+                                "] samples a texture with TEXCOORD_1, which --atlas-uv turns "
+                                "into atlas UVs");
+      std::optional<AccessorView> v = viewAccessor(model_, uv->second);
+      if (!v || v->components != 2) {
+        primitives.reset();
+        break;
+      }
+      std::vector<float> values;
+      values.reserve(v->count * 2);
+      const size_t cs = v->elemSize / 2;
+      for (size_t k = 0; k < v->count; ++k) {
+        const vec2 t(float(readGltfComponent(v->element(k), v->componentType, v->normalized)),
+                     float(readGltfComponent(v->element(k) + cs, v->componentType, v->normalized)));
+        const vec2 a = applyUvTransform(t, e.uvTransform);
+        values.insert(values.end(), {a.x, a.y});
+      }
+      (*primitives)[j]["attributes"]["TEXCOORD_1"] = bin_->addFloats(values, 2, "VEC2", false);
+    }
+    if (!primitives) rollback(mark);
+    return primitives;
+  }
+
+  // Generated UVs: a new mesh for this node alone, rebuilt from the original primitives'
+  // attributes. nullopt (nothing appended) when the loader's vertices cannot be traced back
+  // to them.
+  std::optional<Json> generatedUvPrimitives(const ObjectEdit& e, const tinygltf::Mesh& mesh,
+                                            const Json& meshJson, const glm::dmat4& w) {
+    const Checkpoint mark = checkpoint();
+    const UnwrapResult& unwrap = *result_.unwraps[e.index];
+    std::optional<SourceMap> src = traceSources(model_, mesh, w);
+    if (!src || !reproducesLoaderVertices(*src, unwrap, e.object)) return std::nullopt;
+    std::optional<Json> primitives =
+        rebuildFromSources(model_, meshJson, mesh, *src, unwrap,
+                           glm::determinant(glm::dmat3(w)) < 0.0, e.uvTransform, *bin_);
+    if (!primitives) rollback(mark);
+    return primitives;
+  }
+
+  // The trace must reproduce the loader's vertices: same triangle count, every new vertex
+  // at its source's world position (float rounding aside).
+  static bool reproducesLoaderVertices(const SourceMap& src, const UnwrapResult& unwrap,
+                                       const Object& o) {
+    size_t triangles = 0;
+    for (size_t t : src.primitiveTriangles) triangles += t;
+    bool traced =
+        triangles == unwrap.triangles.size() && unwrap.vertexRemap.size() == o.positions.size();
+    for (size_t v = 0; traced && v < unwrap.vertexRemap.size(); ++v) {
+      const uint32_t s = unwrap.vertexRemap[v];
+      if (s >= src.worldPositions.size()) return false;
+      const vec3 d = src.worldPositions[s] - o.positions[v];
+      const float scale = 1.0f + maxComponent(glm::abs(o.positions[v]));
+      traced = maxComponent(glm::abs(d)) <= 1e-4f * scale;
+    }
+    return traced;
+  }
+
+  Checkpoint checkpoint() {
+    return {bin_->bytes().size(), doc_["accessors"].size(), doc_["bufferViews"].size()};
+  }
+
+  // Drops a partial rebuild.
+  void rollback(const Checkpoint& mark) {
+    doc_["accessors"].erase(doc_["accessors"].begin() + long(mark.accessors),
+                            doc_["accessors"].end());
+    doc_["bufferViews"].erase(doc_["bufferViews"].begin() + long(mark.views),
+                              doc_["bufferViews"].end());
+    bin_->bytes().resize(mark.bytes);
+  }
+
+  void listLightmapExtension() {
+    if (!lightmapUsed_) return;
+    if (!doc_.contains("extensionsUsed") || !doc_["extensionsUsed"].is_array())
+      doc_["extensionsUsed"] = Json::array();
+    Json& used = doc_["extensionsUsed"];
     if (std::find(used.begin(), used.end(), Json(kLightmapExtension)) == used.end())
       used.push_back(kLightmapExtension);
   }
 
   // Baked lights: a viewer must not add them again. Instances of one light that differ (a
   // Shadowmask light without a channel is baked fully) get a copy of the light each.
-  if (!result.scene.lights.empty() && doc.contains("extensions") &&
-      doc["extensions"].is_object() && doc["extensions"].contains("KHR_lights_punctual") &&
-      doc["extensions"]["KHR_lights_punctual"].is_object() &&
-      doc["extensions"]["KHR_lights_punctual"].contains("lights") &&
-      doc["extensions"]["KHR_lights_punctual"]["lights"].is_array()) {
-    Json& lights = doc["extensions"]["KHR_lights_punctual"]["lights"];
-    const LightModePlan& plan = result.lightModes;
+  void markBakedLights() {
+    if (result_.scene.lights.empty() || !doc_.contains("extensions") ||
+        !doc_["extensions"].is_object() || !doc_["extensions"].contains("KHR_lights_punctual") ||
+        !doc_["extensions"]["KHR_lights_punctual"].is_object() ||
+        !doc_["extensions"]["KHR_lights_punctual"].contains("lights") ||
+        !doc_["extensions"]["KHR_lights_punctual"]["lights"].is_array())
+      return;
+    Json& lights = doc_["extensions"]["KHR_lights_punctual"]["lights"];
+    const LightModePlan& plan = result_.lightModes;
     std::map<std::pair<int, bool>, size_t> definition;  // (light, baked) -> lights[] index
     std::set<int> marked;
-    for (size_t l = 0; l < result.scene.lights.size(); ++l) {
-      const Light& light = result.scene.lights[l];
+    for (size_t l = 0; l < result_.scene.lights.size(); ++l) {
+      const Light& light = result_.scene.lights[l];
       if (light.lightIndex < 0 || size_t(light.lightIndex) >= lights.size() ||
-          light.nodeIndex < 0 || size_t(light.nodeIndex) >= doc["nodes"].size())
+          light.nodeIndex < 0 || size_t(light.nodeIndex) >= doc_["nodes"].size())
         continue;
-      const bool baked = l < plan.bakeDirect.size() ? bool(plan.bakeDirect[l])
-                                                    : light.mode == LightMode::Baked;
-      auto mark = [&](Json& element) {
-        if (Json* k = kilnExtras(element)) {
-          (*k)["baked"] = baked;
-          (*k)["mode"] = lightModeName(light.mode);
-        } else {
-          out.warnings.push_back(scenePath + ": extensions.KHR_lights_punctual.lights[" +
-                                 std::to_string(light.lightIndex) +
-                                 "]: extras is not an object; not marked baked or not");
-        }
-      };
+      const bool baked =
+          l < plan.bakeDirect.size() ? bool(plan.bakeDirect[l]) : light.mode == LightMode::Baked;
       const std::pair<int, bool> key{light.lightIndex, baked};
       if (definition.count(key)) {
         if (definition[key] != size_t(light.lightIndex))
-          doc["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
+          doc_["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
               definition[key];
         continue;
       }
       if (marked.insert(light.lightIndex).second) {
-        mark(lights[size_t(light.lightIndex)]);
+        markLight(lights[size_t(light.lightIndex)], light, baked);
         definition[key] = size_t(light.lightIndex);
         continue;
       }
       Json copy = lights[size_t(light.lightIndex)];
-      mark(copy);
+      markLight(copy, light, baked);
       lights.push_back(copy);
       definition[key] = lights.size() - 1;
-      doc["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
+      doc_["nodes"][size_t(light.nodeIndex)]["extensions"]["KHR_lights_punctual"]["light"] =
           lights.size() - 1;
     }
   }
 
-  if (!bin.bytes().empty()) {
-    doc["buffers"].push_back(
-        {{"uri", encodeUriPath(uvBufferName)}, {"byteLength", bin.bytes().size()}});
-    if (!options.glb) out.binaries.push_back({uvBufferName, bin.bytes()});
+  // extras.kiln.baked and .mode of one light definition.
+  void markLight(Json& element, const Light& light, bool baked) {
+    if (Json* k = kilnExtras(element)) {
+      (*k)["baked"] = baked;
+      (*k)["mode"] = lightModeName(light.mode);
+    } else {
+      out_.warnings.push_back(scenePath_ + ": extensions.KHR_lights_punctual.lights[" +
+                              std::to_string(light.lightIndex) +
+                              "]: extras is not an object; not marked baked or not");
+    }
   }
 
-  if (options.glb) {
-    // One file: every buffer into the BIN chunk (each starting on 8 bytes, so that every
-    // accessor keeps its alignment), every image with a URI into a bufferView of its own.
-    std::vector<uint8_t> chunk;
+  // The rebuilt meshes' data: the new buffer (a file beside a .gltf; merged into a .glb).
+  void addUvBuffer() {
+    if (bin_->bytes().empty()) return;
+    doc_["buffers"].push_back(
+        {{"uri", encodeUriPath(uvBufferName_)}, {"byteLength", bin_->bytes().size()}});
+    if (!options_.glb) out_.binaries.push_back({uvBufferName_, bin_->bytes()});
+  }
+
+  // .glb: one file: every buffer into the BIN chunk (each starting on 8 bytes, so that every
+  // accessor keeps its alignment), every bufferView moved onto buffer 0.
+  Status mergeBuffersIntoChunk() {
     std::vector<size_t> base;
-    for (size_t b = 0; b < doc["buffers"].size(); ++b) {
-      const Json& buffer = doc["buffers"][b];
+    for (size_t b = 0; b < doc_["buffers"].size(); ++b) {
+      const Json& buffer = doc_["buffers"][b];
       const size_t length = buffer.is_object() && buffer.contains("byteLength") &&
                                     buffer["byteLength"].is_number_integer() &&
                                     buffer["byteLength"].get<int64_t>() > 0
                                 ? buffer["byteLength"].get<size_t>()
                                 : 0;
       const std::vector<unsigned char>& data =
-          b < model.buffers.size() ? model.buffers[b].data : bin.bytes();
+          b < model_.buffers.size() ? model_.buffers[b].data : bin_->bytes();
       if (data.size() < length)
-        return Error{scenePath + ": buffers[" + std::to_string(b) + "] holds " +
+        return Error{scenePath_ + ": buffers[" + std::to_string(b) + "] holds " +
                      std::to_string(data.size()) + " bytes, less than its byteLength " +
                      std::to_string(length)};
-      while (chunk.size() % 8) chunk.push_back(0);
-      base.push_back(chunk.size());
-      chunk.insert(chunk.end(), data.begin(), data.begin() + long(length));
+      while (chunk_.size() % 8) chunk_.push_back(0);
+      base.push_back(chunk_.size());
+      chunk_.insert(chunk_.end(), data.begin(), data.begin() + long(length));
     }
-    for (Json& view : doc["bufferViews"]) {
+    for (Json& view : doc_["bufferViews"]) {
       // (kiln's own views hold signed integers, the parsed ones unsigned: both are integers)
       if (!view.is_object() || !view.contains("buffer") || !view["buffer"].is_number_integer())
         continue;
@@ -961,64 +1083,112 @@ Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapB
       view["buffer"] = 0;
       view["byteOffset"] = base[size_t(b)] + view.value("byteOffset", size_t(0));
     }
-    for (size_t i = 0; i < doc["images"].size(); ++i) {
-      Json& image = doc["images"][i];
+    return Status::success();
+  }
+
+  // .glb: every image with a URI (the lightmap PNGs too) into a bufferView of its own, with
+  // its mimeType.
+  void embedImages() {
+    for (size_t i = 0; i < doc_["images"].size(); ++i) {
+      Json& image = doc_["images"][i];
       if (!image.is_object() || !image.contains("uri") || !image["uri"].is_string()) continue;
       const std::string uri = image["uri"].get<std::string>();
-      const bool page = i >= firstLightmapImage;
+      const bool page = i >= firstLightmapImage_;
       const std::vector<unsigned char>& bytes =
-          page ? options.ldrPngs[i - firstLightmapImage] : model.images[i].image;
+          page ? options_.ldrPngs[i - firstLightmapImage_] : model_.images[i].image;
       if (bytes.empty()) continue;  // not found: warned above, the URI kept
       const std::string mime = page ? "image/png" : imageMimeType(uri, image, bytes);
       if (mime.empty()) {
-        out.warnings.push_back(scenePath + ": images[" + std::to_string(i) +
-                               "]: unknown image type; left as the URI '" + uri + "'");
+        out_.warnings.push_back(scenePath_ + ": images[" + std::to_string(i) +
+                                "]: unknown image type; left as the URI '" + uri + "'");
         continue;
       }
-      while (chunk.size() % 4) chunk.push_back(0);
-      doc["bufferViews"].push_back(
-          {{"buffer", 0}, {"byteOffset", chunk.size()}, {"byteLength", bytes.size()}});
-      chunk.insert(chunk.end(), bytes.begin(), bytes.end());
+      while (chunk_.size() % 4) chunk_.push_back(0);
+      doc_["bufferViews"].push_back(
+          {{"buffer", 0}, {"byteOffset", chunk_.size()}, {"byteLength", bytes.size()}});
+      chunk_.insert(chunk_.end(), bytes.begin(), bytes.end());
       image.erase("uri");
-      image["bufferView"] = doc["bufferViews"].size() - 1;
+      image["bufferView"] = doc_["bufferViews"].size() - 1;
       image["mimeType"] = mime;
     }
-    while (chunk.size() % 4) chunk.push_back(0);
-    doc["buffers"] = Json::array();
-    if (!chunk.empty()) doc["buffers"].push_back({{"byteLength", chunk.size()}});
-    for (const char* key : {"accessors", "bufferViews", "meshes", "buffers", "textures",
-                            "samplers", "images"})
-      if (doc[key].empty()) doc.erase(key);
-    std::string json = doc.dump();
+  }
+
+  // .glb: the container (header, JSON chunk, BIN chunk), within the format's 4 GiB.
+  Status writeGlbContainer() {
+    while (chunk_.size() % 4) chunk_.push_back(0);
+    doc_["buffers"] = Json::array();
+    if (!chunk_.empty()) doc_["buffers"].push_back({{"byteLength", chunk_.size()}});
+    dropEmptyArrays();
+    std::string json = doc_.dump();
     while (json.size() % 4) json.push_back(' ');  // the JSON chunk is padded with spaces
     auto u32 = [&](uint32_t v) {
-      for (int k = 0; k < 4; ++k) out.contents.push_back(uint8_t(v >> (8 * k)));
+      for (int k = 0; k < 4; ++k) out_.contents.push_back(uint8_t(v >> (8 * k)));
     };
-    const uint64_t total = 12 + 8 + json.size() + (chunk.empty() ? 0 : 8 + chunk.size());
+    const uint64_t total = 12 + 8 + json.size() + (chunk_.empty() ? 0 : 8 + chunk_.size());
     if (total > 0xFFFFFFFFull)
-      return Error{scenePath + ": the output .glb would be " + std::to_string(total) +
+      return Error{scenePath_ + ": the output .glb would be " + std::to_string(total) +
                    " bytes, more than a .glb can hold (4 GiB); write a .gltf instead"};
-    out.contents.reserve(size_t(total));
-    out.contents.insert(out.contents.end(), {'g', 'l', 'T', 'F'});
+    out_.contents.reserve(size_t(total));
+    out_.contents.insert(out_.contents.end(), {'g', 'l', 'T', 'F'});
     u32(2);
     u32(uint32_t(total));
     u32(uint32_t(json.size()));
-    out.contents.insert(out.contents.end(), {'J', 'S', 'O', 'N'});
-    out.contents.insert(out.contents.end(), json.begin(), json.end());
-    if (!chunk.empty()) {
-      u32(uint32_t(chunk.size()));
-      out.contents.insert(out.contents.end(), {'B', 'I', 'N', 0});
-      out.contents.insert(out.contents.end(), chunk.begin(), chunk.end());
+    out_.contents.insert(out_.contents.end(), {'J', 'S', 'O', 'N'});
+    out_.contents.insert(out_.contents.end(), json.begin(), json.end());
+    if (!chunk_.empty()) {
+      u32(uint32_t(chunk_.size()));
+      out_.contents.insert(out_.contents.end(), {'B', 'I', 'N', 0});
+      out_.contents.insert(out_.contents.end(), chunk_.begin(), chunk_.end());
     }
-    return out;
+    return Status::success();
   }
 
-  for (const char* key : {"accessors", "bufferViews", "meshes", "buffers", "textures",
-                          "samplers", "images"})
-    if (doc[key].empty()) doc.erase(key);
-  const std::string text = doc.dump(1) + "\n";
-  out.contents.assign(text.begin(), text.end());
-  return out;
+  // .gltf: the JSON text, indented by one space.
+  void writeGltfText() {
+    dropEmptyArrays();
+    const std::string text = doc_.dump(1) + "\n";
+    out_.contents.assign(text.begin(), text.end());
+  }
+
+  // Arrays kiln created (or found) empty are left out of the output.
+  void dropEmptyArrays() {
+    for (const char* key :
+         {"accessors", "bufferViews", "meshes", "buffers", "textures", "samplers", "images"})
+      if (doc_[key].empty()) doc_.erase(key);
+  }
+
+  const std::string& scenePath_;
+  const LightmapBakeResult& result_;
+  const Json& lightmaps_;  // the manifest's "lightmaps" array
+  const OutputGltfOptions& options_;
+  const bool rgbm_;  // the LDR pages are RGBM (else dLDR)
+
+  OutputGltf out_;
+  Json doc_;  // the input document, edited into the output
+  bool inputIsGlb_ = false;
+  tinygltf::Model model_;  // the input's buffers (and, for a .glb output, images' bytes)
+  fs::path inputDir_, outputDir_, inputFile_;  // canonical
+  std::string glbChunkName_, uvBufferName_;
+  std::vector<FileRef> fileRefs_;
+  std::optional<BinaryBuilder> bin_;  // the rebuilt meshes' accessors, into a new buffer
+  std::vector<glm::dmat4> world_;     // every node's world matrix
+  size_t firstLightmapImage_ = 0;     // images[] index of page 0's PNG
+  std::vector<size_t> pageTexture_;   // per page: its textures[] index
+  std::vector<int> meshUsers_;        // per mesh: how many nodes use it
+  bool lightmapUsed_ = false;         // some node got MX_lightmap
+  std::set<int> warnedMaterials_;     // --atlas-uv and a material that reads TEXCOORD_1
+  std::vector<uint8_t> chunk_;        // .glb: the BIN chunk
+};
+
+}  // namespace
+
+double lightmapIntensity(LdrEncoding encoding) {
+  return encoding == LdrEncoding::Rgbm ? std::numbers::pi : 2.0 * std::numbers::pi;
+}
+
+Result<OutputGltf> buildOutputGltf(const std::string& scenePath, const LightmapBakeResult& result,
+                                   const Json& lightmaps, const OutputGltfOptions& options) {
+  return OutputGltfBuilder(scenePath, result, lightmaps, options).run();
 }
 
 }  // namespace kiln

@@ -48,6 +48,10 @@ namespace {
 
 constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
 constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
+constexpr uint64_t kEnclosureTag = 0x656e;  // "en": enclosure rays' stream
+// Enclosure test: cosine-weighted rays per sample point (it stops at the first that
+// escapes, so an open point costs one or two rays).
+constexpr uint32_t kEnclosureRays = 32;
 // Light batches per texel: the spread of batch means estimates each texel's variance for
 // the denoiser (the batches together are exactly the full estimate).
 constexpr uint32_t kVarianceBatches = 4;
@@ -85,6 +89,8 @@ Status validate(const LightmapBakeSettings& s) {
                ")");
   if (s.ambientOcclusion && !(s.aoMaxDistance > 0.0f))
     return bad("aoMaxDistance must be > 0 (got " + std::to_string(s.aoMaxDistance) + ")");
+  if (!(s.enclosedTexels >= 0.0f) || !std::isfinite(s.enclosedTexels))
+    return bad("enclosedTexels must be >= 0 (got " + std::to_string(s.enclosedTexels) + ")");
   if (s.ambientOcclusion && !(s.aoAmount >= 0.0f && s.aoAmount <= 1.0f))
     return bad("aoAmount must be in [0, 1] (got " + std::to_string(s.aoAmount) + ")");
   for (int c = 0; c < 3; ++c)
@@ -220,9 +226,10 @@ struct LightSettings {
   int supersampling = 1;
   uint64_t seed = 0;
   float backfaceTolerance = 0.5f;
+  float enclosedTexels = 8.0f;
+  const AtlasLayout* layout = nullptr;  // texelsPerUnit per object (enclosure reach)
   bool ambientOcclusion = false;
   float aoMaxDistance = 1.0f;
-  float aoAmount = 1.0f;
   bool directional = false;
   const ChannelLights* shadowmask = nullptr;  // null: no shadowmask
 };
@@ -246,6 +253,33 @@ struct PointSums {
   }
 };
 
+// Validity on double-sided geometry: the point is enclosed when every one of
+// kEnclosureRays cosine-weighted rays hits geometry within `reach` and none of those hits is
+// the front of a single-sided surface (single-sided walls facing the point make a room, not
+// a solid; the back-face test covers single-sided solids). Double-sided surfaces have no
+// inside for the back-face test to see, so a floor under a closed double-sided box (all of
+// its rays end on the box within its size) is caught here. BLEND surfaces let light through:
+// a hit on one counts as escaping. Adds the rays traced to `rays`.
+bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, uint64_t key,
+              uint64_t& rays) {
+  if (!(reach > 0.0f)) return false;
+  const Scene& scene = integrator.scene();
+  const Frame frame = Frame::fromNormal(p.normal);
+  const vec3 origin = offsetRayOrigin(p.position, p.normal);
+  const uint64_t enKey = hashValues(key, kEnclosureTag);
+  for (uint32_t j = 0; j < kEnclosureRays; ++j) {
+    SampleStream stream(enKey, j);
+    const vec3 dir = frame.toWorld(squareToCosineHemisphere(stream.get2D()));
+    ++rays;
+    const auto hit = integrator.tracer().intersect(Ray{origin, dir, 0.0f, reach});
+    if (!hit) return false;
+    const Material& m = scene.materialOf(hit->object, hit->triangle);
+    if (m.alphaMode == AlphaMode::Blend) return false;
+    if (!m.doubleSided && !hit->backFace) return false;
+  }
+  return true;
+}
+
 // Stage 5, one texel: samples split evenly over its points (point i takes indices
 // [i S / k, (i + 1) S / k) of the texel's stream), each point's share in kVarianceBatches
 // batches. Points inside geometry (back-face share > tolerance) are left out of a valid
@@ -255,7 +289,8 @@ struct PointSums {
 // geometry, ~0 (paths end at back faces, shadow rays are blocked), which is what it keeps
 // unless it is next to a valid texel (lightmap_baker.h, postPage).
 TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
-                      const TexelPoint* points, uint32_t pointCount, uint64_t& aoRays) {
+                      const TexelPoint* points, uint32_t pointCount, float enclosedReach,
+                      uint64_t& extraRays) {
   TexelLight out;
   PointSums used, all;
   std::vector<std::pair<double, uint32_t>> batches;  // (luminance of batch mean, size)
@@ -282,7 +317,8 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
       point.direction += glm::dvec3(direction) * double(bCount);
       batches.push_back({double(luminance(e)) * kInvPi, bCount});
     }
-    const bool inside = float(backFaces) > s.backfaceTolerance * float(count);
+    const bool inside = float(backFaces) > s.backfaceTolerance * float(count) ||
+                        enclosed(integrator, p, enclosedReach, hashValues(key, i), extraRays);
     if (inside) batches.resize(batchStart);  // does not count towards a valid texel's value
     if (s.shadowmask) {
       // Each channel: the visibility of the one light of that channel reaching p, averaged
@@ -321,7 +357,7 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
         if (integrator.tracer().occluded(Ray{origin, dir, 0.0f, s.aoMaxDistance}))
           point.aoOccluded += 1.0;
       }
-      aoRays += count;
+      extraRays += count;
     }
     all.add(point);
     if (!inside) used.add(point);
@@ -339,7 +375,7 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     out.direction = encodeDominantDirection(vec3(sums.direction / n),
                                             luminance(vec3(sums.light / n)), normal);
   }
-  if (s.ambientOcclusion) out.ao = 1.0f - s.aoAmount * float(sums.aoOccluded / n);
+  if (s.ambientOcclusion) out.ao = 1.0f - float(sums.aoOccluded / n);
   // Variance of the mean from the spread of the batch means (batches of near-equal size).
   if (out.valid && batches.size() >= 2) {
     const double mean = double(luminance(out.value));
@@ -364,28 +400,47 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
       texels.size(),
       [&](size_t begin, size_t end) {
         const uint64_t before = Integrator::threadRayCount();
-        uint64_t aoRays = 0;
+        uint64_t extraRays = 0;
         for (size_t i = begin; i < end; ++i) {
           RasterPage& page = pages[texels[i].page];
           TexelSample& texel = page.texels[texels[i].index];
           const auto [points, count] = texelPoints(page, texel, s.supersampling);
           const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
-          out[i] = lightTexel(integrator, s, key, points, count, aoRays);
+          const float reach =
+              s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
+          out[i] = lightTexel(integrator, s, key, points, count, reach, extraRays);
         }
-        rays += Integrator::threadRayCount() - before + aoRays;
+        rays += Integrator::threadRayCount() - before + extraRays;
       },
       options);
   if (done) progress.finish();
   return done;
 }
 
+// Progress of stage 6's steps over all pages, in texels of the maps each step processes
+// (the light, then the shadowmask, direction and AO maps).
+struct PostProgress {
+  Progress denoise, fill, dilation, seams;
+  PostProgress(size_t denoised, size_t filled, size_t stitched, bool show)
+      : denoise("denoise", denoised, "texels", show && denoised > 0),
+        fill("fill", filled, "texels", show),
+        dilation("dilation", filled, "texels", show),
+        seams("seams", stitched, "texels", show && stitched > 0) {}
+  void finish() {
+    denoise.finish();
+    fill.finish();
+    dilation.finish();
+    seams.finish();
+  }
+};
+
 // Stage 6 for one page: denoise, fill invalid texels, dilate into padding, stitch seams.
 void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
               const RasterPage& raster,
               const std::vector<TexelRef>& texels,
               const std::vector<TexelLight>& light, const LightmapBakeSettings& settings,
-              bool withShadowmask, const ParallelOptions& parallel,
-              LightmapPageResult& result) {
+              bool withShadowmask, const ParallelOptions& parallel, PostProgress& progress,
+              LightmapPageResult& result, size_t& clampedTexels) {
   const int w = raster.width, h = raster.height;
   const size_t n = size_t(w) * size_t(h);
   LightmapPage page;
@@ -439,18 +494,35 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   fill.ringSeeds = &onVisible;
   DenoiseSettings denoiseSettings;
   denoiseSettings.parallel = parallel;
-  if (settings.denoise) denoise(page, denoiseSettings);
-  const std::vector<uint8_t> filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
+  // Each step runs inside its progress line's Busy, so the line's time is the step's own.
+  if (settings.denoise) {
+    auto busy = progress.denoise.busy();
+    denoise(page, denoiseSettings);
+    progress.denoise.advance(n);
+  }
+  std::vector<uint8_t> filled;
+  {
+    auto busy = progress.fill.busy();
+    filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
+    progress.fill.advance(n);
+  }
   // Rings enough to cover the gutters between objects (2 x padding) and between charts.
   const int rings = std::max(2, 2 * settings.padding);
-  const std::vector<uint8_t> mask = dilate(page.radiance, filled, rings, parallel);
+  std::vector<uint8_t> mask;
+  {
+    auto busy = progress.dilation.busy();
+    mask = dilate(page.radiance, filled, rings, parallel);
+    progress.dilation.advance(n);
+  }
   auto stitch = [&](Image& image, const std::vector<uint8_t>& imageMask) {
     if (!settings.stitchSeams) return;
+    auto busy = progress.seams.busy();
     for (size_t o = 0; o < scene.objects.size(); ++o) {
       if (layout.objects[o].lightmapIndex != int(pageIndex)) continue;
       const auto seams = findSeams(scene.objects[o], layout.objects[o].scaleOffset, w, h);
       if (!seams.empty()) (void)stitchSeams(image, imageMask, seams);
     }
+    progress.seams.advance(n);
   };
   stitch(page.radiance, mask);
   result.light = std::move(page.radiance);
@@ -465,8 +537,17 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
       if (page.objectId[t] < 0)
         for (int c = 0; c < 4; ++c)
           image->pixels[4 * t + c] = image == &shadowmask ? 1.0f : 0.5f;
-    const std::vector<uint8_t> f = fillInvalid(*image, page.valid, page.objectId, fill);
-    const std::vector<uint8_t> m = dilate(*image, f, rings, parallel);
+    std::vector<uint8_t> f, m;
+    {
+      auto busy = progress.fill.busy();
+      f = fillInvalid(*image, page.valid, page.objectId, fill);
+      progress.fill.advance(n);
+    }
+    {
+      auto busy = progress.dilation.busy();
+      m = dilate(*image, f, rings, parallel);
+      progress.dilation.advance(n);
+    }
     stitch(*image, m);
   }
   result.shadowmask = std::move(shadowmask);
@@ -474,15 +555,51 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
 
   if (!ao.empty()) {
     if (settings.denoise) {
+      auto busy = progress.denoise.busy();
       LightmapPage aoPage = page;  // guides; radiance replaced by the AO map
       aoPage.radiance = std::move(ao);
       aoPage.variance.clear();
       denoise(aoPage, denoiseSettings);
       ao = std::move(aoPage.radiance);
+      progress.denoise.advance(n);
     }
-    const std::vector<uint8_t> aoFilled = fillInvalid(ao, page.valid, page.objectId, fill);
-    (void)dilate(ao, aoFilled, rings, parallel);
+    std::vector<uint8_t> aoFilled;
+    {
+      auto busy = progress.fill.busy();
+      aoFilled = fillInvalid(ao, page.valid, page.objectId, fill);
+      progress.fill.advance(n);
+    }
+    {
+      auto busy = progress.dilation.busy();
+      (void)dilate(ao, aoFilled, rings, parallel);
+      progress.dilation.advance(n);
+    }
+    // Applied after both maps are final, texel by texel, so that every texel of the written
+    // pages satisfies light = light without AO x (1 - aoAmount (1 - ao)) (the factor is in
+    // [1 - aoAmount, 1]: it cannot make a texel negative).
+    if (settings.aoAmount > 0.0f)
+      for (size_t t = 0; t < n; ++t) {
+        const float factor = 1.0f - settings.aoAmount * (1.0f - ao.pixels[t]);
+        for (int c = 0; c < 3; ++c) result.light.pixels[3 * t + c] *= factor;
+      }
     result.ambientOcclusion = std::move(ao);
+  }
+
+  // Last guard: a light map holds E / pi, never below 0 (unsigned encodings clamp it
+  // anyway). Every stage above keeps values >= 0 (integrator estimates, convex kernels in
+  // denoise / fill / dilate, the stitcher's non-negative solve), so nothing should reach
+  // here; what does is set to 0 and counted in stats.clampedTexels (the manifest's stats),
+  // not hidden.
+  for (size_t t = 0; t < n; ++t) {
+    bool clamped = false;
+    for (int c = 0; c < 3; ++c) {
+      float& v = result.light.pixels[3 * t + c];
+      if (!(v >= 0.0f) || !std::isfinite(v)) {
+        v = 0.0f;
+        clamped = true;
+      }
+    }
+    clampedTexels += clamped ? 1 : 0;
   }
 }
 
@@ -522,10 +639,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 1: UVs.
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
+  unwrap.showProgress = showProgress;
+  unwrap.cancel = cancel;
   auto unwraps = generateMissingLightmapUvs(result.scene, settings.resolution, unwrap);
+  if (cancelled(cancel)) return Error{"cancelled"};
   if (!unwraps) return Error{"lightmap UVs: " + unwraps.error()};
   result.unwraps = std::move(unwraps).value();
-  if (cancelled(cancel)) return Error{"cancelled"};
 
   // Stage 2: atlas.
   AtlasSettings atlas;
@@ -533,23 +652,31 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   atlas.padding = settings.padding;
   atlas.maxSize = settings.maxSize;
   atlas.locked = settings.lockedAtlas;
+  atlas.showProgress = showProgress;
+  atlas.cancel = cancel;
   auto layout = packAtlas(result.scene, atlas);
+  if (cancelled(cancel)) return Error{"cancelled"};
   if (!layout) return Error{"lightmap atlas: " + layout.error()};
   result.layout = std::move(layout).value();
   result.warnings = result.layout.warnings;
-  if (cancelled(cancel)) return Error{"cancelled"};
 
   // Stage 3: texels.
   RasterSettings raster;
   raster.supersampling = settings.supersampling;
   raster.parallel = parallel;
+  size_t rasterRows = 0;  // rasterizeAtlas runs in parallel over each page's rows
+  for (const AtlasPage& p : result.layout.pages) rasterRows += size_t(p.height);
+  Progress rasterProgress("rasterization", rasterRows, "rows", showProgress && rasterRows > 0);
+  raster.parallel.progress = &rasterProgress;
   auto rasterPages = rasterizeAtlas(result.scene, result.layout, raster);
-  if (!rasterPages) return Error{"lightmap texels: " + rasterPages.error()};
-  std::vector<RasterPage> pages = std::move(rasterPages).value();
   if (cancelled(cancel)) return Error{"cancelled"};
+  if (!rasterPages) return Error{"lightmap texels: " + rasterPages.error()};
+  rasterProgress.finish();
+  std::vector<RasterPage> pages = std::move(rasterPages).value();
   const std::vector<TexelRef> texels = coveredTexels(pages);
 
-  auto tracer = Tracer::create(result.scene);
+  // Static objects only: dynamic ones cast, bounce and emit nothing into the lightmaps.
+  auto tracer = Tracer::create(result.scene, TracerGeometry::BakedGI);
   if (!tracer) return Error{"lightmap bake: " + tracer.error()};
   std::atomic<uint64_t> rays{0};
 
@@ -580,7 +707,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.backfaceTolerance = settings.backfaceTolerance;
   ls.ambientOcclusion = settings.ambientOcclusion;
   ls.aoMaxDistance = settings.aoMaxDistance;
-  ls.aoAmount = settings.aoAmount;
+  ls.enclosedTexels = settings.enclosedTexels;
+  ls.layout = &result.layout;
   ls.directional = settings.directional;
   ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
   std::vector<TexelLight> light;
@@ -592,16 +720,31 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
 
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());
+  size_t pageTexels = 0;
+  for (const RasterPage& p : pages) pageTexels += size_t(p.width) * size_t(p.height);
+  // Maps per step (postPage): light, shadowmask, direction and AO are filled and dilated;
+  // light and AO denoised; light, shadowmask and direction stitched.
+  const size_t extraMaps = size_t(withShadowmask) + size_t(settings.directional);
+  const size_t aoMaps = settings.ambientOcclusion ? 1 : 0;
+  PostProgress postProgress(settings.denoise ? pageTexels * (1 + aoMaps) : 0,
+                            pageTexels * (1 + extraMaps + aoMaps),
+                            settings.stitchSeams ? pageTexels * (1 + extraMaps) : 0,
+                            showProgress);
   for (uint32_t p = 0; p < pages.size(); ++p) {
     postPage(result.scene, result.layout, p, pages[p], texels, light, settings,
              withShadowmask,
-             parallel, result.pages[p]);
+             parallel, postProgress, result.pages[p], result.stats.clampedTexels);
     if (cancelled(cancel)) return Error{"cancelled"};
   }
+  postProgress.finish();
 
   result.stats.texels = texels.size();
   for (const TexelLight& t : light) result.stats.invalidTexels += t.valid ? 0 : 1;
   result.stats.rays = rays.load();
+  if (result.stats.clampedTexels > 0)
+    result.warnings.push_back(std::to_string(result.stats.clampedTexels) +
+                              " light map texel(s) were negative or not finite after "
+                              "post-processing and were set to 0 (stats.clampedTexels)");
   if (result.stats.invalidTexels > 0 && result.stats.invalidTexels * 10 > texels.size())
     result.warnings.push_back(std::to_string(result.stats.invalidTexels) + " of " +
                               std::to_string(texels.size()) +

@@ -8,13 +8,15 @@
 //   4. sample points pushed out of nearby geometry (walls meeting floors neither leak nor
 //      self-shadow);
 //   5. light: the integrator's irradiance at every sample point; texel value = E / pi;
-//      validity from the share of back-face hits; optional ambient occlusion; what each
+//      validity from the share of back-face hits and from enclosure (rays that all hit
+//      geometry close by); optional ambient occlusion; what each
 //      light contributes follows the lighting mode (src/light_modes.h); optionally the
 //      dominant direction (lightmap/directional.h) and the mixed lights' shadowmask;
 //   6. post: invalid texels that bilinear lookups at visible points can reach filled from
 //      valid neighbours (deeper ones keep their physical value, 0 when enclosed), denoised,
 //      dilated into padding, seams stitched
-//      (postprocess.h, seams.h).
+//      (postprocess.h, seams.h); ambient occlusion applied when aoAmount > 0; a last guard
+//      sets any negative texel left to 0 and counts it (stats.clampedTexels).
 // Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
 #pragma once
 
@@ -54,11 +56,19 @@ struct LightmapBakeSettings {
   float indirectIntensity = 1.0f;
   // Validity: a texel whose rays see back faces more often than this is inside geometry.
   float backfaceTolerance = 0.5f;
-  // Ambient occlusion map (0 = fully occluded, 1 = open), rays of length aoMaxDistance;
-  // aoAmount blends it towards 1 (0 = no effect).
+  // Validity that also works on double-sided geometry (whose back faces do not count above):
+  // a sample point whose rays all hit geometry within this many texel edges (of its
+  // object's lightmap resolution) is enclosed, e.g. a floor under a closed box. 0 = off.
+  // docs/lightmap_outputs.md, "Texel validity".
+  float enclosedTexels = 8.0f;
+  // Ambient occlusion map (0 = fully occluded, 1 = open): the fraction of cosine-weighted
+  // rays of length aoMaxDistance that escape. aoAmount > 0 also applies it to the light map
+  // (Unity's Progressive Lightmapper "Ambient Occlusion" with equal direct and indirect
+  // contributions): light x (1 - aoAmount (1 - ao)), i.e. mix(1, ao, aoAmount); 0 = the map
+  // is written but not applied.
   bool ambientOcclusion = false;
   float aoMaxDistance = 1.0f;
-  float aoAmount = 1.0f;
+  float aoAmount = 0.0f;
   // Mixed lighting (docs/mixed_lighting.md): what mixed lights bake (src/light_modes.h).
   // Realtime lights are never baked; baked lights always fully.
   LightingMode lightingMode = LightingMode::BakedIndirect;
@@ -85,7 +95,9 @@ Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& sett
 
 struct LightmapPageResult {
   Image light;                 // RGB, E / pi, glTF orientation (row 0 = v 0)
-  Image ambientOcclusion;      // 1 channel when settings.ambientOcclusion, else empty
+  // 1 channel when settings.ambientOcclusion, else empty: the fraction of AO rays that
+  // escape (not blended with aoAmount; `light` already holds light x mix(1, ao, aoAmount)).
+  Image ambientOcclusion;
   // RGBA, present when some light has a shadowmask channel (Shadowmask mode): channel c holds
   // the visible fraction (0 = fully shadowed, 1 = unshadowed; soft shadows give fractions)
   // of the mixed light of channel c whose influence (range sphere) holds the texel; 1 where
@@ -106,6 +118,10 @@ struct LightmapPageResult {
 struct LightmapBakeStats {
   size_t texels = 0;        // texels baked (covered by objects)
   size_t invalidTexels = 0;  // inside geometry, filled from neighbours
+  // Texels of the light pages (padding included) that still held a negative or non-finite
+  // component after post-processing and were set to 0 by the final guard. Every stage keeps
+  // values >= 0 by itself, so this is 0 unless something is wrong: it is reported, not hidden.
+  size_t clampedTexels = 0;
   uint64_t rays = 0;        // every ray traced (push-out, integrator, AO)
   double seconds = 0.0;     // wall time of the stages that trace them (push-out and light)
 };

@@ -161,52 +161,95 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   return j;
 }
 
-Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResult& result,
-                            const LightmapBakeSettings& settings,
-                            const LightmapOutputSettings& requested,
-                            std::vector<std::string>* warningsOut) {
-  if (requested.outDir.empty()) return Error{"no output directory given"};
-  // The output glTF's lightmap textures are the LDR pages: dLDR unless --ldr chose RGBM.
-  LightmapOutputSettings output = requested;
-  if (output.writeGltf && output.ldr == LdrEncoding::None) output.ldr = LdrEncoding::Dldr;
-  const LdrEncoding ldr = output.ldr;
-  OutputGltfOptions gltfOptions;
-  gltfOptions.outDir = output.outDir;
-  gltfOptions.ldr = ldr;
-  gltfOptions.atlasUv = output.atlasUv;
-  gltfOptions.glb = output.glb;
-  std::vector<std::string> extraWarnings;
-  if (result.pages.size() != result.layout.pages.size())
-    return Error{"bake result has " + std::to_string(result.pages.size()) + " pages but its atlas " +
-                 std::to_string(result.layout.pages.size())};
-  const fs::path dir(output.outDir);
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
-    return Error{output.outDir + ": cannot create the output directory" +
-                 (ec ? ": " + ec.message() : std::string())};
+namespace {
 
-  StagedFiles files(dir);
-  Manifest manifest = bakeManifest(result, scenePath);
-  for (size_t i = 0; i < result.pages.size(); ++i) {
-    const LightmapPageResult& page = result.pages[i];
+// Copies `source` to the temporary path `p` (a staged copy of an input file).
+Status copyInputFile(const std::string& source, const std::string& p) {
+  std::error_code failed;
+  fs::copy_file(source, p, fs::copy_options::overwrite_existing, failed);
+  if (failed) return Error{"cannot copy " + source + ": " + failed.message()};
+  // A read-only input makes a read-only copy otherwise.
+  fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::add, failed);
+  return Status::success();
+}
+
+// Writes one bake's outputs; writeLightmapOutputs runs it. Every stage stages its files
+// (StagedFiles); nothing replaces an earlier output until commit, after the manifest.
+class LightmapOutputWriter {
+ public:
+  LightmapOutputWriter(const std::string& scenePath, const LightmapBakeResult& result,
+                       const LightmapBakeSettings& settings,
+                       const LightmapOutputSettings& requested)
+      : scenePath_(scenePath),
+        result_(result),
+        settings_(settings),
+        requested_(requested),
+        output_(outputSettings(requested)),
+        ldr_(output_.ldr),
+        files_(fs::path(output_.outDir)) {
+    gltfOptions_.outDir = output_.outDir;
+    gltfOptions_.ldr = ldr_;
+    gltfOptions_.atlasUv = output_.atlasUv;
+    gltfOptions_.glb = output_.glb;
+  }
+
+  Status run(std::vector<std::string>* warningsOut) {
+    if (Status s = createOutputDirectory(); !s) return s;
+    manifest_ = bakeManifest(result_, scenePath_);
+    for (size_t i = 0; i < result_.pages.size(); ++i)
+      if (Status s = stagePage(i); !s) return s;
+    recordSettings();
+    if (output_.writeGltf)
+      if (Status s = stageGltf(); !s) return s;
+    if (Status s = stageManifest(warningsOut); !s) return s;
+    return files_.commit();
+  }
+
+ private:
+  // The output glTF's lightmap textures are the LDR pages: dLDR unless --ldr chose RGBM.
+  static LightmapOutputSettings outputSettings(const LightmapOutputSettings& requested) {
+    LightmapOutputSettings output = requested;
+    if (output.writeGltf && output.ldr == LdrEncoding::None) output.ldr = LdrEncoding::Dldr;
+    return output;
+  }
+
+  // Checks that there is an output directory and that the bake result is whole, then creates
+  // the directory.
+  Status createOutputDirectory() {
+    if (requested_.outDir.empty()) return Error{"no output directory given"};
+    if (result_.pages.size() != result_.layout.pages.size())
+      return Error{"bake result has " + std::to_string(result_.pages.size()) +
+                   " pages but its atlas " + std::to_string(result_.layout.pages.size())};
+    const fs::path dir(output_.outDir);
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec || !fs::is_directory(dir))
+      return Error{output_.outDir + ": cannot create the output directory" +
+                   (ec ? ": " + ec.message() : std::string())};
+    return Status::success();
+  }
+
+  // Page i: its EXRs (light; AO, direction and shadowmask when baked) and its LDR PNG,
+  // recorded in the manifest.
+  Status stagePage(size_t i) {
+    const LightmapPageResult& page = result_.pages[i];
     const int index = int(i);
-    const AtlasPage& size = result.layout.pages[i];
+    const AtlasPage& size = result_.layout.pages[i];
     if (page.light.width != size.width || page.light.height != size.height ||
         page.light.channels < 3)
       return Error{"bake result: lightmap " + std::to_string(i) + " is " +
                    std::to_string(page.light.width) + " x " + std::to_string(page.light.height) +
                    " x " + std::to_string(page.light.channels) + ", its atlas page " +
                    std::to_string(size.width) + " x " + std::to_string(size.height) + " RGB"};
-    ManifestFiles& fileNames = manifest.lightmaps[i].files;
+    ManifestFiles& fileNames = manifest_.lightmaps[i].files;
     fileNames.light = lightmapFileName(index, "light");
-    if (Status s = files.stage(fileNames.light,
-                               [&](const std::string& p) { return writeExr(p, page.light); });
+    if (Status s = files_.stage(fileNames.light,
+                                [&](const std::string& p) { return writeExr(p, page.light); });
         !s)
       return s;
     if (!page.ambientOcclusion.empty()) {
       fileNames.ao = lightmapFileName(index, "ao");
-      if (Status s = files.stage(
+      if (Status s = files_.stage(
               fileNames.ao,
               [&](const std::string& p) { return writeExr(p, page.ambientOcclusion); });
           !s)
@@ -218,112 +261,132 @@ Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResu
           std::tuple{&page.shadowmask, "shadowmask", &fileNames.shadowmask}}) {
       if (image->empty()) continue;
       *name = lightmapFileName(index, kind);
-      if (Status s = files.stage(*name,
-                                 [&](const std::string& p) { return writeExr(p, *image); });
+      if (Status s = files_.stage(*name, [&](const std::string& p) { return writeExr(p, *image); });
           !s)
         return s;
     }
-    if (ldr != LdrEncoding::None) {
-      const std::string name =
-          "lightmap-" + std::to_string(index) + "_light_" + ldrName(ldr) + ".png";
-      fileNames.lightLdr = name;
-      const LdrImage ldrImage =
-          ldr == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
-      if (Status s =
-              files.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldrImage); });
-          !s)
-        return s;
-      gltfOptions.ldrPages.push_back(name);
-      if (output.glb && output.writeGltf) {  // the .glb embeds the PNG's very bytes
-        Result<std::vector<uint8_t>> png = readBytes(files.temporaryPath(name));
-        if (!png) return Error{png.error()};
-        gltfOptions.ldrPngs.push_back(std::move(png).value());
-      }
-      if (ldr == LdrEncoding::Dldr) {
-        // Texels dLDR clamps: a bright scene wants RGBM.
-        size_t valid = 0, clamped = 0;
-        float brightest = 0.0f;
-        for (size_t t = 0; t < page.valid.size(); ++t) {
-          if (!page.valid[t]) continue;
-          const float* p = &page.light.pixels[t * size_t(page.light.channels)];
-          const float m = std::max({p[0], p[1], p[2]});
-          ++valid;
-          if (m > kDldrRange) ++clamped;
-          brightest = std::max(brightest, m);
-        }
-        const double percent = valid ? 100.0 * double(clamped) / double(valid) : 0.0;
-        if (percent > kDldrClampWarningPercent) {
-          char text[64];
-          std::snprintf(text, sizeof text, "%.1f%% of the valid texels (E/pi up to %.3g)", percent,
-                        double(brightest));
-          extraWarnings.push_back(name + ": " + text + " exceed dLDR's range " +
-                                  std::to_string(int(kDldrRange)) +
-                                  " and are clamped; --ldr rgbm keeps values up to " +
-                                  std::to_string(int(kRgbmRange)));
-        }
-      }
+    if (ldr_ == LdrEncoding::None) return Status::success();
+    return stageLdrPage(page, index, fileNames);
+  }
+
+  // A page's LDR PNG: one of the output glTF's lightmap textures (for a .glb, its bytes).
+  Status stageLdrPage(const LightmapPageResult& page, int index, ManifestFiles& fileNames) {
+    const std::string name =
+        "lightmap-" + std::to_string(index) + "_light_" + ldrName(ldr_) + ".png";
+    fileNames.lightLdr = name;
+    const LdrImage ldrImage =
+        ldr_ == LdrEncoding::Rgbm ? encodeRgbm(page.light) : encodeDldr(page.light, true);
+    if (Status s =
+            files_.stage(name, [&](const std::string& p) { return writeLdrPng(p, ldrImage); });
+        !s)
+      return s;
+    gltfOptions_.ldrPages.push_back(name);
+    if (output_.glb && output_.writeGltf) {  // the .glb embeds the PNG's very bytes
+      Result<std::vector<uint8_t>> png = readBytes(files_.temporaryPath(name));
+      if (!png) return Error{png.error()};
+      gltfOptions_.ldrPngs.push_back(std::move(png).value());
+    }
+    if (ldr_ == LdrEncoding::Dldr) warnAboutDldrClamp(page, name);
+    return Status::success();
+  }
+
+  // Texels dLDR clamps: a bright scene wants RGBM.
+  void warnAboutDldrClamp(const LightmapPageResult& page, const std::string& name) {
+    size_t valid = 0, clamped = 0;
+    float brightest = 0.0f;
+    for (size_t t = 0; t < page.valid.size(); ++t) {
+      if (!page.valid[t]) continue;
+      const float* p = &page.light.pixels[t * size_t(page.light.channels)];
+      const float m = std::max({p[0], p[1], p[2]});
+      ++valid;
+      if (m > kDldrRange) ++clamped;
+      brightest = std::max(brightest, m);
+    }
+    const double percent = valid ? 100.0 * double(clamped) / double(valid) : 0.0;
+    if (percent > kDldrClampWarningPercent) {
+      char text[64];
+      std::snprintf(text, sizeof text, "%.1f%% of the valid texels (E/pi up to %.3g)", percent,
+                    double(brightest));
+      extraWarnings_.push_back(
+          name + ": " + text + " exceed dLDR's range " + std::to_string(int(kDldrRange)) +
+          " and are clamped; --ldr rgbm keeps values up to " + std::to_string(int(kRgbmRange)));
     }
   }
-  manifest.settings = lightmapSettingsJson(settings, output);
-  if (ldr != LdrEncoding::None)
-    manifest.settings["ldrDecode"] =
-        ldr == LdrEncoding::Rgbm
-            ? "rgb = png.rgb * png.a * " + std::to_string(int(kRgbmRange)) +
-                  " (PNG sampled as linear UNORM)"
-            : std::string("rgb = 2 * png.rgb (PNG sampled as sRGB, i.e. linearised)");
 
-  const Json lightmaps = manifestPagesJson(manifest);
-  if (output.writeGltf) {
-    gltfOptions.reservedNames = files.names();
-    gltfOptions.reservedNames.push_back(kManifestFileName);
-    Result<OutputGltf> gltf = buildOutputGltf(scenePath, result, lightmaps, gltfOptions);
+  // The manifest's "settings", with how to decode the LDR pages.
+  void recordSettings() {
+    manifest_.settings = lightmapSettingsJson(settings_, output_);
+    if (ldr_ != LdrEncoding::None)
+      manifest_.settings["ldrDecode"] =
+          ldr_ == LdrEncoding::Rgbm
+              ? "rgb = png.rgb * png.a * " + std::to_string(int(kRgbmRange)) +
+                    " (PNG sampled as linear UNORM)"
+              : std::string("rgb = 2 * png.rgb (PNG sampled as sRGB, i.e. linearised)");
+  }
+
+  // The output glTF (gltf_writer.h) and the files it references: new binaries, copies of the
+  // input's files. Its names avoid every file staged so far and the manifest.
+  Status stageGltf() {
+    const Json lightmaps = manifestPagesJson(manifest_);
+    gltfOptions_.reservedNames = files_.names();
+    gltfOptions_.reservedNames.push_back(kManifestFileName);
+    Result<OutputGltf> gltf = buildOutputGltf(scenePath_, result_, lightmaps, gltfOptions_);
     if (!gltf) return Error{gltf.error()};
-    for (const std::string& w : gltf->warnings) extraWarnings.push_back(w);
+    for (const std::string& w : gltf->warnings) extraWarnings_.push_back(w);
     for (const auto& [name, bytes] : gltf->binaries)
-      if (Status s = files.stage(name,
-                                 [&](const std::string& p) {
-                                   return writeBytes(p, bytes.data(), bytes.size());
-                                 });
+      if (Status s = files_.stage(
+              name,
+              [&](const std::string& p) { return writeBytes(p, bytes.data(), bytes.size()); });
           !s)
         return s;
     for (const auto& [name, source] : gltf->copies)
-      if (Status s = files.stage(name,
-                                 [&](const std::string& p) -> Status {
-                                   std::error_code failed;
-                                   fs::copy_file(source, p, fs::copy_options::overwrite_existing,
-                                                 failed);
-                                   if (failed)
-                                     return Error{"cannot copy " + source + ": " + failed.message()};
-                                   // A read-only input makes a read-only copy otherwise.
-                                   fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write,
-                                                   fs::perm_options::add, failed);
-                                   return Status::success();
-                                 });
+      if (Status s =
+              files_.stage(name, [&](const std::string& p) { return copyInputFile(source, p); });
           !s)
         return s;
     const std::vector<uint8_t>& contents = gltf->contents;
-    if (Status s = files.stage(gltf->fileName,
-                               [&](const std::string& p) {
-                                 return writeBytes(p, contents.data(), contents.size());
-                               });
+    if (Status s = files_.stage(
+            gltf->fileName,
+            [&](const std::string& p) { return writeBytes(p, contents.data(), contents.size()); });
         !s)
       return s;
-    manifest.gltf = gltf->fileName;
+    manifest_.gltf = gltf->fileName;
+    return Status::success();
   }
-  std::vector<std::string> warnings = result.warnings;
-  warnings.insert(warnings.end(), extraWarnings.begin(), extraWarnings.end());
-  if (warningsOut) *warningsOut = extraWarnings;
-  manifest.warnings = warnings;
-  const std::string text = manifestText(manifest);
-  // The manifest is staged last, so it is renamed last: once it is there, everything it
-  // names is too.
-  if (Status s = files.stage(kManifestFileName,
-                             [&](const std::string& p) {
-                               return writeBytes(p, text.data(), text.size());
-                             });
-      !s)
-    return s;
-  return files.commit();
+
+  // manifest.json, with the bake's warnings and the writing's.
+  Status stageManifest(std::vector<std::string>* warningsOut) {
+    std::vector<std::string> warnings = result_.warnings;
+    warnings.insert(warnings.end(), extraWarnings_.begin(), extraWarnings_.end());
+    if (warningsOut) *warningsOut = extraWarnings_;
+    manifest_.warnings = warnings;
+    const std::string text = manifestText(manifest_);
+    // The manifest is staged last, so it is renamed last: once it is there, everything it
+    // names is too.
+    return files_.stage(kManifestFileName, [&](const std::string& p) {
+      return writeBytes(p, text.data(), text.size());
+    });
+  }
+
+  const std::string& scenePath_;
+  const LightmapBakeResult& result_;
+  const LightmapBakeSettings& settings_;
+  const LightmapOutputSettings& requested_;
+  const LightmapOutputSettings output_;  // requested, with the LDR pages the glTF needs
+  const LdrEncoding ldr_;
+  StagedFiles files_;
+  Manifest manifest_;
+  OutputGltfOptions gltfOptions_;
+  std::vector<std::string> extraWarnings_;  // the writing's warnings (not the bake's)
+};
+
+}  // namespace
+
+Status writeLightmapOutputs(const std::string& scenePath, const LightmapBakeResult& result,
+                            const LightmapBakeSettings& settings,
+                            const LightmapOutputSettings& requested,
+                            std::vector<std::string>* warningsOut) {
+  return LightmapOutputWriter(scenePath, result, settings, requested).run(warningsOut);
 }
 
 }  // namespace kiln

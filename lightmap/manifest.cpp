@@ -174,7 +174,8 @@ Manifest bakeManifest(const LightmapBakeResult& result, const std::string& scene
   m.lights = std::move(lights);
   m.scene = std::filesystem::path(scenePath).filename().string();
   m.warnings = result.warnings;
-  m.stats = {result.stats.texels, result.stats.invalidTexels, result.stats.rays};
+  m.stats = {result.stats.texels, result.stats.invalidTexels, result.stats.rays,
+             result.stats.clampedTexels};
   return m;
 }
 
@@ -219,7 +220,8 @@ Json manifestJson(const Manifest& m) {
   j["warnings"] = m.warnings;
   // No times: the files stay deterministic.
   j["stats"] = {
-      {"texels", m.stats.texels}, {"invalidTexels", m.stats.invalidTexels}, {"rays", m.stats.rays}};
+      {"texels", m.stats.texels}, {"invalidTexels", m.stats.invalidTexels}, {"rays", m.stats.rays},
+      {"clampedTexels", m.stats.clampedTexels}};
   return j;
 }
 
@@ -368,7 +370,7 @@ Result<Manifest> readManifest(const Json& j, const std::string& where, ManifestU
     if (!s.is_object()) return fail("stats", "expected an object");
     for (auto [key, field] :
          {std::pair{"texels", &m.stats.texels}, std::pair{"invalidTexels", &m.stats.invalidTexels},
-          std::pair{"rays", &m.stats.rays}}) {
+          std::pair{"rays", &m.stats.rays}, std::pair{"clampedTexels", &m.stats.clampedTexels}}) {
       if (!s.contains(key)) continue;
       if (!s[key].is_number_integer() ||
           (s[key].is_number_integer() && !s[key].is_number_unsigned() && s[key].get<int64_t>() < 0))

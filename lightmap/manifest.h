@@ -88,6 +88,8 @@ struct ManifestSettingsFields {
 
 struct ManifestStats {
   uint64_t texels = 0, invalidTexels = 0, rays = 0;
+  // Light texels set to 0 by the baker's final guard (LightmapBakeStats::clampedTexels).
+  uint64_t clampedTexels = 0;
 };
 
 struct Manifest {

@@ -232,42 +232,72 @@ StitchStats stitchSeams(Image& image, const std::vector<uint8_t>& mask,
 
   const double sqrtLambda = std::sqrt(std::max(0.0, double(settings.regularization)));
   double before = 0.0, after = 0.0;
-  std::vector<double> x0(nv), delta(nv), rM, rR(nv), s, p, qM, qR(nv), m0;
+  std::vector<double> original(nv), x(nv), delta(nv), rM, rR(nv), s, p, qM, qR(nv), m0;
+  std::vector<uint8_t> fixedAtZero(nv);
   for (int ch = 0; ch < c; ++ch) {
-    for (size_t v = 0; v < nv; ++v) x0[v] = image.pixels[texels[v] * c + ch];
-    applyM(x0, m0);
+    for (size_t v = 0; v < nv; ++v) original[v] = image.pixels[texels[v] * c + ch];
+    x = original;
+    applyM(x, m0);
     before += dot(m0, m0);
-    // CGLS for min |M (x0 + delta)|^2 + lambda |delta|^2, i.e. A delta ~ b with
-    // A = [M; sqrt(lambda) I], b = [-M x0; 0]; starts at delta = 0.
-    std::fill(delta.begin(), delta.end(), 0.0);
-    rM.resize(rows);
-    for (size_t r = 0; r < rows; ++r) rM[r] = -m0[r];
-    std::fill(rR.begin(), rR.end(), 0.0);
-    applyMt(rM, s);
-    p = s;
-    double gamma = dot(s, s);
-    const double gamma0 = gamma;
-    for (int it = 0; it < settings.iterations && gamma > 1e-30 && gamma > 1e-24 * gamma0; ++it) {
-      applyM(p, qM);
-      for (size_t v = 0; v < nv; ++v) qR[v] = sqrtLambda * p[v];
-      const double qq = dot(qM, qM) + dot(qR, qR);
-      if (qq <= 0.0) break;
-      const double alpha = gamma / qq;
-      for (size_t v = 0; v < nv; ++v) delta[v] += alpha * p[v];
-      for (size_t r = 0; r < rows; ++r) rM[r] -= alpha * qM[r];
-      for (size_t v = 0; v < nv; ++v) rR[v] -= alpha * qR[v];
-      applyMt(rM, s);
-      for (size_t v = 0; v < nv; ++v) s[v] += sqrtLambda * rR[v];
-      const double gammaNew = dot(s, s);
-      const double beta = gammaNew / gamma;
-      for (size_t v = 0; v < nv; ++v) p[v] = s[v] + beta * p[v];
-      gamma = gammaNew;
+    // Free variables: all, or (nonNegative) those not yet pinned at 0. Each round solves
+    //   min |M (x + delta)|^2 + lambda |x + delta - original|^2 over the free variables
+    // with CGLS (A = [M; sqrt(lambda) I] restricted to the free columns, b = [-M x;
+    // -sqrt(lambda) (x - original)], from delta = 0). The unconstrained least-squares
+    // solution overshoots: a dark texel whose bilinear lookup is pulled towards a much
+    // brighter other side, or a texel shared by lookups pulled different ways, can go below
+    // 0 (breakfast room: 212 texels, down to -0.59). A texel held at 0 is the nearest
+    // value a light map can hold, so those are pinned at 0 and the others solved again
+    // (an active-set pass; each round pins at least one more texel, so it ends).
+    std::fill(fixedAtZero.begin(), fixedAtZero.end(), 0);
+    if (settings.nonNegative)
+      for (size_t v = 0; v < nv; ++v)
+        if (x[v] < 0.0) {
+          x[v] = 0.0;  // a negative input is outside what the map may hold
+          fixedAtZero[v] = 1;
+        }
+    for (size_t round = 0; round <= nv; ++round) {
+      applyM(x, m0);
+      std::fill(delta.begin(), delta.end(), 0.0);
+      rM.resize(rows);
+      for (size_t r = 0; r < rows; ++r) rM[r] = -m0[r];
+      for (size_t v = 0; v < nv; ++v) rR[v] = -sqrtLambda * (x[v] - original[v]);
+      auto gradient = [&]() {
+        applyMt(rM, s);
+        for (size_t v = 0; v < nv; ++v) s[v] = fixedAtZero[v] ? 0.0 : s[v] + sqrtLambda * rR[v];
+      };
+      gradient();
+      p = s;
+      double gamma = dot(s, s);
+      const double gamma0 = gamma;
+      for (int it = 0; it < settings.iterations && gamma > 1e-30 && gamma > 1e-24 * gamma0;
+           ++it) {
+        applyM(p, qM);
+        for (size_t v = 0; v < nv; ++v) qR[v] = sqrtLambda * p[v];
+        const double qq = dot(qM, qM) + dot(qR, qR);
+        if (qq <= 0.0) break;
+        const double alpha = gamma / qq;
+        for (size_t v = 0; v < nv; ++v) delta[v] += alpha * p[v];
+        for (size_t r = 0; r < rows; ++r) rM[r] -= alpha * qM[r];
+        for (size_t v = 0; v < nv; ++v) rR[v] -= alpha * qR[v];
+        gradient();
+        const double gammaNew = dot(s, s);
+        const double beta = gammaNew / gamma;
+        for (size_t v = 0; v < nv; ++v) p[v] = s[v] + beta * p[v];
+        gamma = gammaNew;
+      }
+      bool pinned = false;
+      for (size_t v = 0; v < nv; ++v) {
+        x[v] += delta[v];
+        if (settings.nonNegative && x[v] < 0.0) {
+          x[v] = 0.0;
+          fixedAtZero[v] = 1;
+          pinned = true;
+        }
+      }
+      if (!pinned) break;
     }
-    for (size_t v = 0; v < nv; ++v) {
-      x0[v] += delta[v];
-      image.pixels[texels[v] * c + ch] = float(x0[v]);
-    }
-    applyM(x0, m0);
+    for (size_t v = 0; v < nv; ++v) image.pixels[texels[v] * c + ch] = float(x[v]);
+    applyM(x, m0);
     after += dot(m0, m0);
   }
   stats.rmsBefore = std::sqrt(before / double(rows * size_t(c)));

@@ -56,6 +56,10 @@ struct StitchSettings {
   // is the least change that makes the sides agree, and the residual disagreement scales
   // with this weight.
   float regularization = 1e-4f;
+  // Texel values stay >= 0 (light, AO, shadowmask and encoded direction maps all are): texels
+  // the solve would take below 0 are held at 0 and the rest solved again. false: plain least
+  // squares.
+  bool nonNegative = true;
 };
 
 struct StitchStats {
@@ -75,7 +79,10 @@ void sampleBilinear(const Image& image, vec2 p, float* out);
 //   min sum_pairs |bilinearA - bilinearB|^2 + regularization sum_texels |x - x_original|^2
 // (CGLS, per channel), so the sides move towards each other and agree. A pair whose lookup
 // reads a texel with mask 0 is skipped: dilate first so that chart borders have padding
-// values. Only texels read by the lookups change. Deterministic (serial).
+// values. Only texels read by the lookups change. With settings.nonNegative (default) the
+// minimum is taken over values >= 0: texels the plain solution takes below 0 (a seam with a
+// bright and a dark side) are held at 0 and the others solved again, until none is below.
+// Deterministic (serial).
 StitchStats stitchSeams(Image& image, const std::vector<uint8_t>& mask,
                         const std::vector<SeamEdge>& seams, const StitchSettings& settings = {});
 

@@ -716,14 +716,22 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   auto needs = [&](const Object& o) {
     return isLightmapped(o) && o.uv1.size() != o.positions.size();
   };
+  // Progress in triangles: objects differ wildly in size, and time grows with triangles.
+  size_t triangles = 0;
+  for (const Object& o : scene.objects)
+    if (needs(o)) triangles += o.triangles.size();
+  Progress progress("UV generation", triangles, "triangles",
+                    settings.showProgress && triangles > 0);
   ParallelOptions options;
   options.grain = 1;  // objects differ wildly in size
-  parallelFor(
+  options.cancel = settings.cancel;
+  const bool finished = parallelFor(
       n,
       [&](size_t begin, size_t end) {
         for (size_t i = begin; i < end; ++i) {
           const Object& o = scene.objects[i];
           if (!needs(o)) continue;
+          if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) return;
           UnwrapSettings s = settings;
           s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
           Result<UnwrapResult> r = generateLightmapUvs(o, s);
@@ -731,9 +739,12 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
             unwraps[i] = std::move(*r);
           else
             errors[i] = r.error();
+          progress.advance(o.triangles.size());
         }
       },
       options);
+  if (!finished || (settings.cancel && settings.cancel->load())) return Error{"cancelled"};
+  progress.finish();
   for (size_t i = 0; i < n; ++i)
     if (!errors[i].empty()) return Error{errors[i]};
   for (size_t i = 0; i < n; ++i)

@@ -12,6 +12,7 @@
 // triangles (every chart is checked; failures are split until they pass).
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -39,6 +40,10 @@ struct UnwrapSettings {
   // Charts whose normals all lie within this angle of their mean normal are projected onto
   // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
   float planarAngleDegrees = 1.0f;
+  // generateMissingLightmapUvs only: a progress line on stderr ("UV generation", in
+  // triangles), and a flag polled between objects that stops it with an Error "cancelled".
+  bool showProgress = false;
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // Distortion and packing statistics of an unwrap.
@@ -84,7 +89,7 @@ Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,
 // per scene object, its unwrap (nullopt: kept its own UVs, or not lightmapped) so that the
 // output glTF writer can rebuild the primitives. Objects run in parallel; deterministic.
-// Errors name the object.
+// Errors name the object; a cancel (settings.cancel) returns Error "cancelled".
 Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
     Scene& scene, float resolution, const UnwrapSettings& settings = {});
 

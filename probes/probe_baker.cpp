@@ -151,7 +151,13 @@ std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<con
   if (settings.visibilityResolution <= 0) return {};
   if (settings.visibilityMaxDistance > 0.0f)
     return std::vector<float>(positions.size(), settings.visibilityMaxDistance);
-  return visibilityMaxDistances(positions, scene.bounds);
+  // Over the static objects only: the dynamic ones are not in the baking tracer, and a
+  // probe's visibility map must not change with them (src/tracer.h).
+  Bounds3 bakedBounds;
+  for (const Object& o : scene.objects)
+    if (o.settings.isStatic)
+      for (const vec3& v : o.positions) bakedBounds.extend(v);
+  return visibilityMaxDistances(positions, bakedBounds);
 }
 
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,

@@ -84,7 +84,7 @@ struct ProbeBakeSettings {
   // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
-  // corner of the scene's bounds and the probes (visibilityMaxDistances).
+  // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
   int threads = 0;  // 0 = all cores
 };
@@ -127,8 +127,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             ProbeBakeReport* report = nullptr);
 
 // Each probe's visibility maxDistance D for a bake at `positions`: settings.visibilityMaxDistance
-// when > 0, else per probe the distance to the farthest corner of the scene's bounds and the
-// probes (visibilityMaxDistances). Empty when settings.visibilityResolution is 0.
+// when > 0, else per probe the distance to the farthest corner of the static objects' bounds
+// and the probes (visibilityMaxDistances; dynamic objects are not baked). Empty when
+// settings.visibilityResolution is 0.
 std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<const vec3> positions,
                                                const ProbeBakeSettings& settings);
 

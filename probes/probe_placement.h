@@ -153,7 +153,7 @@ struct ProbePlacementSettings {
   // (default kDefaultVisibilityResolution, as bakeProbes) > 0: every candidate and spawned probe also records a
   // visibility map, and sets are scored with the visibility-weighted blend; 0: plain blend.
   // The maps' maxDistance is bake.visibilityMaxDistance when > 0, else per point, as
-  // bakeProbes sets it (visibilityMaxDistances over the scene's bounds).
+  // bakeProbes sets it (visibilityMaxDistances over the static objects' bounds).
   ProbeBakeSettings bake;
   int threads = 0;
   bool showProgress = false;  // progress lines on stderr for the bakes
@@ -231,8 +231,8 @@ FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
 // hashValues(seed, i). Used as ground truth at check points and for placement's candidates.
 // When `visibility` is given and settings.visibilityResolution > 0, the same rays also fill
 // each point's visibility map (resolution; maxDistance settings.visibilityMaxDistance when
-// > 0, else visibilityMaxDistances over the scene's bounds; moments point-major: the layout of
-// ProbeSet::visibility); otherwise *visibility is left empty (resolution 0).
+// > 0, else visibilityMaxDistances over the static objects' bounds; moments point-major: the
+// layout of ProbeSet::visibility); otherwise *visibility is left empty (resolution 0).
 // Returns an empty vector when cancelled.
 std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
                                  std::span<const vec3> points, const ProbeBakeSettings& settings,

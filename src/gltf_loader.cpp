@@ -15,6 +15,10 @@
 #include "src/gltf_loader.h"
 
 #include <stb_image.h>
+#include <meshoptimizer.h>
+#ifdef KILN_HAVE_DRACO
+#include <draco/compression/decode.h>
+#endif
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -41,13 +45,29 @@ namespace fs = std::filesystem;
 
 constexpr int kMaxJsonDepth = 128;                // deeper documents are rejected
 constexpr uint64_t kMaxImagePixels = 1ull << 26;  // 64 Mpixel: larger images are skipped
+const char* const kSupportedExtensions[] = {
+    "KHR_lights_punctual",   "KHR_materials_emissive_strength", "KHR_mesh_quantization",
+    "KHR_texture_transform", "EXT_meshopt_compression",
+#ifdef KILN_HAVE_DRACO
+    "KHR_draco_mesh_compression",
+#endif
+};
+// Texture-source extensions (an alternative image format for a texture): kiln cannot decode
+// them, but a texture that keeps its core 'source' (PNG/JPEG) is read through that, so a file
+// that lists one as required is accepted when every texture using it has a 'source'.
+const char* const kTextureSourceExtensions[] = {"MSFT_texture_dds", "EXT_texture_webp",
+                                                "KHR_texture_basisu", "EXT_texture_avif"};
+// EXT_meshopt_compression: a decoded bufferView may be at most this many times larger than
+// its compressed bytes. meshopt's codecs cannot do better (the vertex codec spends at least
+// 2 bits per 16 bytes, the index codecs a byte per triangle or index), so a larger claim is
+// hostile, and this bounds what a small file can make the loader allocate.
+constexpr uint64_t kMaxMeshoptExpansion = 128;
+constexpr uint64_t kMeshoptSlack = 4096;
 // Accessor elements without a bufferView (docs/limits.md): per accessor and summed over every
 // read of such accessors in one file.
 constexpr uint64_t kMaxElementsWithoutData = 1ull << 24;
 // World-space coordinates of kept triangles, metres per axis (as for probe positions).
 constexpr float kMaxWorldCoordinate = 1e7f;
-const char* const kSupportedExtensions[] = {"KHR_lights_punctual",
-                                            "KHR_materials_emissive_strength"};
 
 // Thrown by Loader::fail; caught in loadScene.
 struct LoadFailure {
@@ -193,6 +213,8 @@ class Loader {
     readDocument();
     precheck();
     runTinyGltf();
+    decodeMeshopt();
+    decodeDraco();
     checkAccessors();
     convertMaterials();
     convertScene();
@@ -339,6 +361,11 @@ class Loader {
     for (const Json& e : array("extensionsRequired")) {
       if (!e.is_string()) fail("extensionsRequired", "must be an array of strings");
       std::string name = e.get<std::string>();
+      if (std::find(std::begin(kTextureSourceExtensions), std::end(kTextureSourceExtensions),
+                    name) != std::end(kTextureSourceExtensions)) {
+        checkTextureSourceExtension(name);
+        continue;
+      }
       if (std::find(std::begin(kSupportedExtensions), std::end(kSupportedExtensions), name) ==
           std::end(kSupportedExtensions))
         unsupported.push_back(name);
@@ -376,6 +403,7 @@ class Loader {
 
     // Buffers: files present and long enough, before tinygltf reads them.
     bufferLengths_.clear();
+    noDataBuffer_.assign(buffers.size(), false);
     for (size_t i = 0; i < buffers.size(); ++i) {
       std::string element = "buffers[" + std::to_string(i) + "]";
       const Json& b = buffers[i];
@@ -384,6 +412,12 @@ class Loader {
       if (byteLength == 0) fail(element + ".byteLength", "must be >= 1");
       bufferLengths_.push_back(byteLength);
       auto uriIt = b.find("uri");
+      if (uriIt == b.end() && !(isGlb_ && i == 0) && isMeshoptFallback(b, element)) {
+        // EXT_meshopt_compression: a fallback buffer may have no data; only the compressed
+        // bufferViews refer to it, and kiln decodes those instead.
+        noDataBuffer_[i] = true;
+        continue;
+      }
       if (uriIt == b.end()) {
         if (!isGlb_ || i != 0) fail(element, "has no uri (only a .glb's first buffer may omit it)");
         if (byteLength > glbBinSize_)
@@ -398,7 +432,8 @@ class Loader {
       fs::path file = fs::path(baseDir_) / percentDecode(uri);
       std::error_code ec;
       if (fs::exists(file, ec) && !fs::is_regular_file(file, ec))
-        fail(element + ".uri", "'" + uri + "' is not a regular file (a FIFO, device or directory)");
+        fail(element + ".uri",
+             "'" + uri + "' is not a regular file (a FIFO, device or directory)");
       if (!fs::is_regular_file(file, ec)) fail(element, "file '" + uri + "' not found");
       uint64_t fileSize = fs::file_size(file, ec);
       if (ec) fail(element, "cannot read '" + uri + "'");
@@ -429,6 +464,11 @@ class Loader {
         if (stride < 4 || stride > 252 || stride % 4 != 0)
           fail(element + ".byteStride", "must be a multiple of 4 in [4, 252]");
       }
+      bool compressed = checkMeshoptView(i, v, element, buffers.size(), length);
+      if (!compressed && noDataBuffer_[buffer])
+        fail(element, "refers to buffers[" + std::to_string(buffer) +
+                          "], an EXT_meshopt_compression fallback buffer without data, but is "
+                          "not compressed");
     }
 
     for (size_t i = 0; i < accessors.size(); ++i) {
@@ -462,6 +502,11 @@ class Loader {
         const Json& p = (*prims)[j];
         if (!p.is_object()) fail(where, "must be an object");
         checkIndex(p, "indices", where, accessors.size(), "accessors");
+        // tinygltf refuses an indices accessor without a bufferView (Draco's have none): it
+        // gets a document without them, and they are put back after (runTinyGltf).
+        if (auto ix = p.find("indices"); ix != p.end() && accessors[ix->get<size_t>()].is_object() &&
+                                         !accessors[ix->get<size_t>()].contains("bufferView"))
+          viewlessIndices_.push_back({i, j, ix->get<int>()});
         checkIndex(p, "material", where, materials.size(), "materials");
         auto attrs = p.find("attributes");
         if (attrs == p.end() || !attrs->is_object())
@@ -506,6 +551,13 @@ class Loader {
           fail(element + ".uri", "'" + images[i]["uri"].get<std::string>() +
                                      "' is not a regular file (a FIFO, device or directory)");
       }
+      if (hasView) {
+        size_t view = images[i]["bufferView"].get<size_t>();
+        if (isMeshoptView_.count(view))
+          fail(element, "is stored in bufferViews[" + std::to_string(view) +
+                            "], which is EXT_meshopt_compression-compressed (only vertex and "
+                            "index data may be)");
+      }
     }
     for (size_t i = 0; i < samplers.size(); ++i)
       if (!samplers[i].is_object())
@@ -548,6 +600,299 @@ class Loader {
     if (doc_.contains("scene")) checkIndexValue(doc_["scene"], "scene", scenes.size(), "scenes");
   }
 
+  // A required texture-source extension (MSFT_texture_dds...): every texture that uses it must
+  // keep a core 'source' kiln reads instead; said once as a warning.
+  void checkTextureSourceExtension(const std::string& name) {
+    const Json& textures = array("textures");
+    size_t users = 0;
+    for (size_t i = 0; i < textures.size(); ++i) {
+      const Json& t = textures[i];
+      if (!t.is_object()) continue;  // reported by the texture checks below
+      auto ext = t.find("extensions");
+      if (ext == t.end() || !ext->is_object() || !ext->contains(name)) continue;
+      ++users;
+      if (!t.contains("source"))
+        fail("textures[" + std::to_string(i) + "]",
+             "has only an image in " + name +
+                 " (listed in extensionsRequired), which kiln cannot decode, and no 'source' "
+                 "(PNG or JPEG) to read instead");
+    }
+    if (users == 0)
+      warn("extensionsRequired", name + " is listed but no texture uses it; ignored");
+    else
+      warn("extensionsRequired",
+           name + " is required; kiln reads the 'source' image (PNG or JPEG) of the " +
+               std::to_string(users) + " texture(s) that use it instead");
+  }
+
+  // ---- EXT_meshopt_compression ------------------------------------------------------------------
+
+  bool isMeshoptFallback(const Json& buffer, const std::string& element) const {
+    auto ext = buffer.find("extensions");
+    if (ext == buffer.end() || !ext->is_object()) return false;
+    auto mo = ext->find("EXT_meshopt_compression");
+    if (mo == ext->end()) return false;
+    if (!mo->is_object()) fail(element + ".extensions.EXT_meshopt_compression", "must be an object");
+    auto fb = mo->find("fallback");
+    return fb != mo->end() && fb->is_boolean() && fb->get<bool>();
+  }
+
+  // Checks bufferViews[i]'s EXT_meshopt_compression object (extension spec: buffer, byteOffset,
+  // byteLength, byteStride, count, mode, filter) and records it; false when the view has none.
+  bool checkMeshoptView(size_t i, const Json& v, const std::string& viewElement,
+                        size_t bufferCount, uint64_t viewLength) {
+    auto ext = v.find("extensions");
+    if (ext == v.end() || !ext->is_object()) return false;
+    auto mo = ext->find("EXT_meshopt_compression");
+    if (mo == ext->end()) return false;
+    std::string element = viewElement + ".extensions.EXT_meshopt_compression";
+    if (!mo->is_object()) fail(element, "must be an object");
+    if (!mo->contains("buffer")) fail(element, "missing required 'buffer'");
+    checkIndex(*mo, "buffer", element, bufferCount, "buffers");
+    MeshoptView m;
+    m.view = i;
+    m.buffer = (*mo)["buffer"].get<uint64_t>();
+    m.offset = unsignedProperty(*mo, "byteOffset", element, false);
+    m.length = unsignedProperty(*mo, "byteLength", element, true);
+    m.stride = unsignedProperty(*mo, "byteStride", element, true);
+    m.count = unsignedProperty(*mo, "count", element, true);
+    m.viewLength = viewLength;
+    if (noDataBuffer_[m.buffer])
+      fail(element + ".buffer", "refers to buffers[" + std::to_string(m.buffer) +
+                                    "], a fallback buffer without data");
+    if (m.offset > bufferLengths_[m.buffer] || m.length > bufferLengths_[m.buffer] - m.offset)
+      fail(element, "byteOffset " + std::to_string(m.offset) + " + byteLength " +
+                        std::to_string(m.length) + " runs past buffers[" +
+                        std::to_string(m.buffer) + "] (" +
+                        std::to_string(bufferLengths_[m.buffer]) + " bytes)");
+    auto modeIt = mo->find("mode");
+    std::string mode = modeIt != mo->end() && modeIt->is_string() ? modeIt->get<std::string>() : "";
+    std::string filter = "NONE";
+    if (auto f = mo->find("filter"); f != mo->end()) {
+      if (!f->is_string()) fail(element + ".filter", "must be a string");
+      filter = f->get<std::string>();
+    }
+    if (mode == "ATTRIBUTES") {
+      m.mode = MeshoptMode::Attributes;
+      if (m.stride == 0 || m.stride > 256 || m.stride % 4 != 0)
+        fail(element + ".byteStride", "must be a multiple of 4 in [4, 256] for ATTRIBUTES");
+    } else if (mode == "TRIANGLES" || mode == "INDICES") {
+      m.mode = mode == "TRIANGLES" ? MeshoptMode::Triangles : MeshoptMode::Indices;
+      if (m.stride != 2 && m.stride != 4)
+        fail(element + ".byteStride", "must be 2 or 4 for " + mode);
+      if (m.mode == MeshoptMode::Triangles && m.count % 3 != 0)
+        fail(element + ".count", "must be a multiple of 3 for TRIANGLES");
+      if (filter != "NONE") fail(element + ".filter", "must be NONE for " + mode);
+    } else {
+      fail(element + ".mode", "must be \"ATTRIBUTES\", \"TRIANGLES\" or \"INDICES\"");
+    }
+    if (filter == "NONE") {
+      m.filter = MeshoptFilter::None;
+    } else if (filter == "OCTAHEDRAL") {
+      m.filter = MeshoptFilter::Octahedral;
+      if (m.stride != 4 && m.stride != 8) fail(element + ".byteStride", "must be 4 or 8 for OCTAHEDRAL");
+    } else if (filter == "QUATERNION") {
+      m.filter = MeshoptFilter::Quaternion;
+      if (m.stride != 8) fail(element + ".byteStride", "must be 8 for QUATERNION");
+    } else if (filter == "EXPONENTIAL") {
+      m.filter = MeshoptFilter::Exponential;
+    } else {
+      fail(element + ".filter", "must be NONE, OCTAHEDRAL, QUATERNION or EXPONENTIAL (got '" +
+                                    filter + "')");
+    }
+    if (m.count == 0) fail(element + ".count", "must be >= 1");
+    // The decoded bytes fill the bufferView; both are bounded by the compressed size.
+    uint64_t limit = m.length > (uint64_t(1) << 48) ? UINT64_MAX
+                                                    : kMaxMeshoptExpansion * m.length + kMeshoptSlack;
+    if (m.count > limit || m.count * m.stride > limit || viewLength > limit)
+      fail(element, "decodes to " + std::to_string(std::max(viewLength, m.count * m.stride)) +
+                        " bytes from " + std::to_string(m.length) +
+                        " compressed bytes, more than meshopt's codecs can produce (at most " +
+                        std::to_string(kMaxMeshoptExpansion) + "x)");
+    if (m.count * m.stride > viewLength)
+      fail(element, "count " + std::to_string(m.count) + " x byteStride " +
+                        std::to_string(m.stride) + " is longer than " + viewElement +
+                        ".byteLength " + std::to_string(viewLength));
+    if (auto vs = v.find("byteStride"); m.mode == MeshoptMode::Attributes && vs != v.end() &&
+                                        vs->get<uint64_t>() != m.stride)
+      fail(element + ".byteStride", "must equal " + viewElement + ".byteStride");
+    meshopt_.push_back(m);
+    isMeshoptView_.insert(i);
+    return true;
+  }
+
+  // After tinygltf: every compressed bufferView decoded into a buffer of its own, and the view
+  // pointed at it, so that everything downstream reads plain bufferViews.
+  void decodeMeshopt() {
+    for (const MeshoptView& m : meshopt_) {
+      std::string element =
+          "bufferViews[" + std::to_string(m.view) + "].extensions.EXT_meshopt_compression";
+      tinygltf::BufferView& view = model_.bufferViews[m.view];
+      const auto& src = model_.buffers[m.buffer].data;
+      if (src.size() < m.offset + m.length) fail(element, "compressed bytes missing");
+      tinygltf::Buffer decoded;
+      decoded.data.assign(m.viewLength, 0);
+      const unsigned char* in = src.data() + m.offset;
+      int rc = 0;
+      switch (m.mode) {
+        case MeshoptMode::Attributes:
+          rc = meshopt_decodeVertexBuffer(decoded.data.data(), m.count, m.stride, in, m.length);
+          break;
+        case MeshoptMode::Triangles:
+          rc = meshopt_decodeIndexBuffer(decoded.data.data(), m.count, m.stride, in, m.length);
+          break;
+        case MeshoptMode::Indices:
+          rc = meshopt_decodeIndexSequence(decoded.data.data(), m.count, m.stride, in, m.length);
+          break;
+      }
+      if (rc != 0)
+        fail(element, "meshopt could not decode the data (error " + std::to_string(rc) +
+                          ": malformed or truncated)");
+      switch (m.filter) {
+        case MeshoptFilter::None:
+          break;
+        case MeshoptFilter::Octahedral:
+          meshopt_decodeFilterOct(decoded.data.data(), m.count, m.stride);
+          break;
+        case MeshoptFilter::Quaternion:
+          meshopt_decodeFilterQuat(decoded.data.data(), m.count, m.stride);
+          break;
+        case MeshoptFilter::Exponential:
+          meshopt_decodeFilterExp(decoded.data.data(), m.count, m.stride);
+          break;
+      }
+      model_.buffers.push_back(std::move(decoded));
+      bufferLengths_.push_back(m.viewLength);
+      view.buffer = int(model_.buffers.size() - 1);
+      view.byteOffset = 0;
+      view.byteLength = m.viewLength;
+    }
+    // Fallback buffers without data reached tinygltf as 1-byte placeholders (runTinyGltf);
+    // nothing refers to them any more.
+    for (size_t i = 0; i < noDataBuffer_.size(); ++i)
+      if (noDataBuffer_[i]) bufferLengths_[i] = model_.buffers[i].data.size();
+  }
+
+  // ---- KHR_draco_mesh_compression --------------------------------------------------------------
+
+  // After tinygltf: each Draco-compressed primitive decoded; its accessors (which have no
+  // bufferView of their own) pointed at new buffers holding the decoded values, so that the
+  // rest of the loader reads plain accessors. Without Draco support in the build the extension
+  // is refused in extensionsRequired (kSupportedExtensions) and, when only used, the
+  // primitive's uncompressed fallback accessors are read.
+  void decodeDraco() {
+#ifdef KILN_HAVE_DRACO
+    const Json& meshes = array("meshes");
+    std::set<int> rewritten;
+    for (size_t m = 0; m < meshes.size(); ++m) {
+      const Json& prims = meshes[m]["primitives"];
+      for (size_t j = 0; j < prims.size(); ++j) {
+        auto ext = prims[j].find("extensions");
+        if (ext == prims[j].end() || !ext->is_object()) continue;
+        auto dr = ext->find("KHR_draco_mesh_compression");
+        if (dr == ext->end()) continue;
+        std::string element = "meshes[" + std::to_string(m) + "].primitives[" +
+                              std::to_string(j) + "].extensions.KHR_draco_mesh_compression";
+        decodeDracoPrimitive(*dr, model_.meshes[m].primitives[j], element, &rewritten);
+      }
+    }
+#endif
+  }
+
+#ifdef KILN_HAVE_DRACO
+  void decodeDracoPrimitive(const Json& dr, const tinygltf::Primitive& prim,
+                            const std::string& element, std::set<int>* rewritten) {
+    if (!dr.is_object()) fail(element, "must be an object");
+    if (!dr.contains("bufferView")) fail(element, "missing required 'bufferView'");
+    checkIndex(dr, "bufferView", element, model_.bufferViews.size(), "bufferViews");
+    auto attrs = dr.find("attributes");
+    if (attrs == dr.end() || !attrs->is_object())
+      fail(element, "missing required 'attributes' object");
+    const auto& view = model_.bufferViews[dr["bufferView"].get<size_t>()];
+    const auto& data = model_.buffers[size_t(view.buffer)].data;
+    if (view.byteOffset + view.byteLength > data.size())
+      fail(element, "bufferView runs past its buffer's data");
+    draco::DecoderBuffer in;
+    in.Init(reinterpret_cast<const char*>(data.data() + view.byteOffset), view.byteLength);
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodeMeshFromBuffer(&in);
+    if (!decoded.ok())
+      fail(element, "Draco could not decode the mesh: " + decoded.status().error_msg_string());
+    std::unique_ptr<draco::Mesh> mesh = std::move(decoded).value();
+    const size_t points = mesh->num_points(), faces = mesh->num_faces();
+    auto claim = [&](int accessor, const std::string& what, size_t count) {
+      std::string where = "accessors[" + std::to_string(accessor) + "]";
+      if (!rewritten->insert(accessor).second)
+        fail(where, "is used by more than one Draco-compressed primitive");
+      if (model_.accessors[size_t(accessor)].count != count)
+        fail(element, what + " (" + where + ") has count " +
+                          std::to_string(model_.accessors[size_t(accessor)].count) +
+                          ", the Draco mesh has " + std::to_string(count));
+    };
+    if (prim.indices >= 0) {
+      claim(prim.indices, "indices", 3 * faces);
+      std::vector<uint32_t> idx(3 * faces);
+      for (draco::FaceIndex f(0); f < mesh->num_faces(); ++f)
+        for (int c = 0; c < 3; ++c) idx[3 * f.value() + size_t(c)] = mesh->face(f)[c].value();
+      replaceAccessorData(prim.indices, idx.data(), idx.size() * 4,
+                          TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
+    } else if (faces > 0) {
+      fail(element, "the primitive has no 'indices' accessor for the Draco mesh's faces");
+    }
+    for (auto it = attrs->begin(); it != attrs->end(); ++it) {
+      std::string where = element + ".attributes." + it.key();
+      auto target = prim.attributes.find(it.key());
+      if (target == prim.attributes.end())
+        fail(where, "names an attribute the primitive does not have");
+      if (!it.value().is_number_integer()) fail(where, "must be a Draco attribute id");
+      const draco::PointAttribute* attr =
+          mesh->GetAttributeByUniqueId(uint32_t(it.value().get<int64_t>()));
+      if (!attr) fail(where, "no such attribute in the Draco mesh");
+      int accessor = target->second;
+      claim(accessor, it.key(), points);
+      const auto& a = model_.accessors[size_t(accessor)];
+      int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+      if (components <= 0 || components > 16) fail(where, "invalid accessor type");
+      // Integer attributes that are not normalized (JOINTS_n) keep their type; everything
+      // else becomes FLOAT (normalized values arrive in [0, 1] or [-1, 1]).
+      bool integer = !a.normalized && a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT;
+      std::vector<float> f(integer ? 0 : points * size_t(components));
+      std::vector<uint16_t> u(integer ? points * size_t(components) : 0);
+      for (draco::PointIndex p(0); p < mesh->num_points(); ++p) {
+        draco::AttributeValueIndex v = attr->mapped_index(p);
+        bool ok = integer ? attr->ConvertValue<uint16_t>(v, int8_t(components),
+                                                         &u[p.value() * size_t(components)])
+                          : attr->ConvertValue<float>(v, int8_t(components),
+                                                      &f[p.value() * size_t(components)]);
+        if (!ok) fail(where, "Draco could not convert point " + std::to_string(p.value()));
+      }
+      if (integer)
+        replaceAccessorData(accessor, u.data(), u.size() * 2,
+                            TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+      else
+        replaceAccessorData(accessor, f.data(), f.size() * 4, TINYGLTF_COMPONENT_TYPE_FLOAT);
+    }
+  }
+
+  void replaceAccessorData(int accessor, const void* bytes, size_t size, int componentType) {
+    tinygltf::Buffer b;
+    b.data.assign(static_cast<const uint8_t*>(bytes), static_cast<const uint8_t*>(bytes) + size);
+    model_.buffers.push_back(std::move(b));
+    bufferLengths_.push_back(size);
+    tinygltf::BufferView v;
+    v.buffer = int(model_.buffers.size() - 1);
+    v.byteOffset = 0;
+    v.byteLength = size;
+    model_.bufferViews.push_back(v);
+    tinygltf::Accessor& a = model_.accessors[size_t(accessor)];
+    a.bufferView = int(model_.bufferViews.size() - 1);
+    a.byteOffset = 0;
+    a.componentType = componentType;
+    a.normalized = false;
+    a.sparse.isSparse = false;
+  }
+#endif
+
   // ---- pass 3: tinygltf ---------------------------------------------------------------------
 
   void runTinyGltf() {
@@ -555,6 +900,9 @@ class Loader {
     gltf.SetImageLoader(&keepEncodedImage, nullptr);
     std::string err, warn;
     bool ok;
+    if (std::find(noDataBuffer_.begin(), noDataBuffer_.end(), true) != noDataBuffer_.end() ||
+        !viewlessIndices_.empty())
+      rewriteForTinyGltf();
     if (isGlb_) {
       if (bytes_.size() > std::numeric_limits<unsigned int>::max())
         fail("", "file too large for tinygltf (4 GiB)");
@@ -570,8 +918,50 @@ class Loader {
     // tinygltf's own warnings are about images we report ourselves (per texture, with what
     // kiln does about it), so they are not repeated.
     if (!ok) fail("", "invalid glTF: " + trim(err.empty() ? "tinygltf failed" : err));
+    for (const ViewlessIndices& v : viewlessIndices_)
+      model_.meshes[v.mesh].primitives[v.primitive].indices = v.accessor;
     bytes_.clear();
     bytes_.shrink_to_fit();
+  }
+
+  // tinygltf insists on data for every buffer and on a bufferView for every indices accessor:
+  // the document it parses gives each data-less meshopt fallback buffer one placeholder byte
+  // (decodeMeshopt redirects its views) and leaves out indices without a bufferView (restored
+  // after it).
+  void rewriteForTinyGltf() {
+    Json doc = doc_;
+    for (const ViewlessIndices& v : viewlessIndices_)
+      doc["meshes"][v.mesh]["primitives"][v.primitive].erase("indices");
+    for (size_t i = 0; i < noDataBuffer_.size(); ++i)
+      if (noDataBuffer_[i]) {
+        doc["buffers"][i]["uri"] = "data:application/octet-stream;base64,AA==";
+        doc["buffers"][i]["byteLength"] = 1;
+      }
+    for (const MeshoptView& m : meshopt_) doc["bufferViews"][m.view]["byteOffset"] = 0;
+    for (const MeshoptView& m : meshopt_) doc["bufferViews"][m.view]["byteLength"] = 1;
+    std::string json = doc.dump();
+    if (!isGlb_) {
+      bytes_.assign(json.begin(), json.end());
+      return;
+    }
+    // A .glb: the same BIN chunk behind the new JSON chunk.
+    while (json.size() % 4) json.push_back(' ');
+    std::vector<uint8_t> bin;
+    uint64_t binHeader = 20 + uint64_t(readU32(bytes_.data() + 12));
+    if (binHeader + 8 <= bytes_.size())
+      bin.assign(bytes_.begin() + long(binHeader), bytes_.begin() + long(binHeader + 8 + glbBinSize_));
+    std::vector<uint8_t> out(20);
+    auto put32 = [&](size_t at, uint32_t v) {
+      for (int k = 0; k < 4; ++k) out[at + size_t(k)] = uint8_t(v >> (8 * k));
+    };
+    std::memcpy(out.data(), "glTF", 4);
+    put32(4, 2);
+    put32(8, uint32_t(20 + json.size() + bin.size()));
+    put32(12, uint32_t(json.size()));
+    put32(16, 0x4E4F534Au);
+    out.insert(out.end(), json.begin(), json.end());
+    out.insert(out.end(), bin.begin(), bin.end());
+    bytes_ = std::move(out);
   }
 
   // ---- pass 4a: accessors ---------------------------------------------------------------------
@@ -667,7 +1057,8 @@ class Loader {
       // so that the work follows the bytes the file really holds.
       zeroElementsRead_ += a.count;
       if (zeroElementsRead_ > kMaxElementsWithoutData)
-        fail(element, "read by " + use + ": more than " + std::to_string(kMaxElementsWithoutData) +
+        fail(element, "read by " + use + ": more than " +
+                          std::to_string(kMaxElementsWithoutData) +
                           " accessor elements without a bufferView in the whole file (they "
                           "hold no data: zeros, or sparse values)");
     }
@@ -748,13 +1139,54 @@ class Loader {
 
       dst.baseColorTexture = useTexture(pbr.baseColorTexture.index,
                                         element + ".pbrMetallicRoughness.baseColorTexture");
-      dst.baseColorTexCoord = texCoordSet(pbr.baseColorTexture.texCoord,
-                                          element + ".pbrMetallicRoughness.baseColorTexture");
+      int baseSet = pbr.baseColorTexture.texCoord, emissiveSet = src.emissiveTexture.texCoord;
+      if (auto p = jm.find("pbrMetallicRoughness"); p != jm.end() && p->is_object())
+        if (auto t = p->find("baseColorTexture"); t != p->end())
+          dst.baseColorTransform = textureTransform(
+              *t, element + ".pbrMetallicRoughness.baseColorTexture", &baseSet);
+      if (auto t = jm.find("emissiveTexture"); t != jm.end())
+        dst.emissiveTransform = textureTransform(*t, element + ".emissiveTexture", &emissiveSet);
+      dst.baseColorTexCoord =
+          texCoordSet(baseSet, element + ".pbrMetallicRoughness.baseColorTexture");
       dst.emissiveTexture = useTexture(src.emissiveTexture.index, element + ".emissiveTexture");
-      dst.emissiveTexCoord =
-          texCoordSet(src.emissiveTexture.texCoord, element + ".emissiveTexture");
+      dst.emissiveTexCoord = texCoordSet(emissiveSet, element + ".emissiveTexture");
       scene_.materials.push_back(std::move(dst));
     }
+  }
+
+  // A textureInfo's KHR_texture_transform (identity when absent); its 'texCoord', when given,
+  // replaces *texCoord (the extension's rule).
+  TextureTransform textureTransform(const Json& info, const std::string& infoElement,
+                                    int* texCoord) const {
+    TextureTransform t;
+    if (!info.is_object()) return t;
+    auto ext = info.find("extensions");
+    if (ext == info.end() || !ext->is_object()) return t;
+    auto tt = ext->find("KHR_texture_transform");
+    if (tt == ext->end()) return t;
+    std::string element = infoElement + ".extensions.KHR_texture_transform";
+    if (!tt->is_object()) fail(element, "must be an object");
+    auto number = [&](const Json& v, const std::string& where) {
+      if (!v.is_number() || !std::isfinite(float(v.get<double>())))
+        fail(where, "must be a finite number");
+      return float(v.get<double>());
+    };
+    auto pair = [&](const char* key, vec2* out) {
+      auto it = tt->find(key);
+      if (it == tt->end()) return;
+      if (!it->is_array() || it->size() != 2)
+        fail(element + "." + key, "must be an array of 2 numbers");
+      for (int c = 0; c < 2; ++c) (*out)[c] = number((*it)[size_t(c)], element + "." + key);
+    };
+    pair("offset", &t.offset);
+    pair("scale", &t.scale);
+    if (auto r = tt->find("rotation"); r != tt->end()) t.rotation = number(*r, element + ".rotation");
+    if (auto c = tt->find("texCoord"); c != tt->end()) {
+      if (!c->is_number_integer() || c->get<int64_t>() < 0 || c->get<int64_t>() > 1 << 20)
+        fail(element + ".texCoord", "must be an integer >= 0");
+      *texCoord = int(c->get<int64_t>());
+    }
+    return t;
   }
 
   // Rejects non-finite or negative factors and values above `max`.
@@ -780,9 +1212,27 @@ class Loader {
     if (gltfTexture < 0 || !options_.loadTextures) return -1;
     auto known = textureMap_.find(gltfTexture);
     if (known != textureMap_.end()) return known->second;
+    if (options_.cancel && options_.cancel->load()) fail("", "cancelled");
     int result = decodeTexture(gltfTexture);
     textureMap_[gltfTexture] = result;
+    if (options_.textureProgress) {
+      if (texturesUsed_ == 0) texturesUsed_ = countUsedTextures();
+      options_.textureProgress(textureMap_.size(), texturesUsed_);
+    }
     return result;
+  }
+
+  // How many distinct textures the materials use (what useTexture will decode), for progress.
+  size_t countUsedTextures() const {
+    std::vector<uint8_t> used(model_.textures.size(), 0);
+    auto mark = [&](int t) {
+      if (t >= 0 && size_t(t) < used.size()) used[size_t(t)] = 1;
+    };
+    for (const tinygltf::Material& m : model_.materials) {
+      mark(m.pbrMetallicRoughness.baseColorTexture.index);
+      mark(m.emissiveTexture.index);
+    }
+    return std::max<size_t>(1, size_t(std::count(used.begin(), used.end(), uint8_t(1))));
   }
 
   int decodeTexture(int t) {
@@ -831,7 +1281,8 @@ class Loader {
     // A PNG's size is in its IHDR chunk. Read it here: stb_image refuses PNGs above 2^30 bytes
     // decoded with "too large", then tries its other formats and reports "unknown image type".
     static const uint8_t kPngMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    if (size >= 24 && std::memcmp(data, kPngMagic, 8) == 0 && std::memcmp(data + 12, "IHDR", 4) == 0) {
+    if (size >= 24 && std::memcmp(data, kPngMagic, 8) == 0 &&
+        std::memcmp(data + 12, "IHDR", 4) == 0) {
       auto be32 = [&](int at) {
         return uint32_t(data[at]) << 24 | uint32_t(data[at + 1]) << 16 |
                uint32_t(data[at + 2]) << 8 | uint32_t(data[at + 3]);
@@ -945,10 +1396,20 @@ class Loader {
       }
     std::vector<int> roots;
     int sceneIndex = -1;
-    if (model_.defaultScene >= 0)
+    size_t sceneCount = model_.scenes.size();
+    if (options_.scene >= 0) {
+      if (size_t(options_.scene) >= sceneCount)
+        fail("scenes", "scene " + std::to_string(options_.scene) + " was asked for, but the file has " +
+                           std::to_string(sceneCount) + " scene(s) (numbered from 0)");
+      sceneIndex = options_.scene;
+    } else if (model_.defaultScene >= 0) {
       sceneIndex = model_.defaultScene;
-    else if (!model_.scenes.empty())
+    } else if (sceneCount > 0) {
       sceneIndex = 0;
+    }
+    if (options_.scene < 0 && sceneCount > 1)
+      warn("scenes", "scene " + std::to_string(sceneIndex) + " of " + std::to_string(sceneCount) +
+                         " loaded (the file's default); --scene N chooses another");
     if (sceneIndex >= 0) {
       roots = model_.scenes[size_t(sceneIndex)].nodes;
       for (int r : roots)
@@ -1001,6 +1462,13 @@ class Loader {
       for (auto it = children.rbegin(); it != children.rend(); ++it) stack.emplace_back(*it, world);
     }
 
+    // World matrices of the scene's nodes first: skins need their joints' before any mesh.
+    nodeWorld_.assign(nodeCount, glm::dmat4(1.0));
+    inScene_.assign(nodeCount, false);
+    for (const auto& [node, world] : order) {
+      nodeWorld_[size_t(node)] = world;
+      inScene_[size_t(node)] = true;
+    }
     for (const auto& [node, world] : order) convertNode(node, world);
 
     if (defaultMaterialUsed_) {
@@ -1145,6 +1613,7 @@ class Loader {
     if (auto v = e.choice("receiveGI", {"lightmaps", "probes"}))
       settings->receiveGI = *v == "probes" ? ReceiveGI::Probes : ReceiveGI::Lightmaps;
     if (auto v = e.boolean("lppv")) settings->lppv = *v;
+    if (auto v = e.boolean("castShadows")) settings->castShadows = *v;
     e.find("lightmap");  // kiln bake writes it into its output glTF; a bake of that repacks
     if (const Json* p = e.find("probes")) {
       if (!p->is_array()) fail(e.where("probes"), "must be an array of [x, y, z] positions");
@@ -1162,7 +1631,30 @@ class Loader {
     e.warnUnknown(this);
   }
 
+  // kiln reads scene settings from the scene's extras.kiln, not from the root's. The root's
+  // holds only what kiln bake writes there ("lightmaps", the output glTF's list); anything
+  // else is a setting put in the wrong place: say where it belongs.
+  void checkRootExtras(int sceneIndex) {
+    auto extras = doc_.find("extras");
+    if (extras == doc_.end() || !extras->is_object()) return;
+    auto k = extras->find("kiln");
+    if (k == extras->end()) return;
+    const std::string where = "scenes[" + std::to_string(std::max(sceneIndex, 0)) + "]";
+    if (!k->is_object()) {
+      warn("extras.kiln",
+           "root extras.kiln is ignored; put scene settings in " + where + ".extras.kiln");
+      return;
+    }
+    std::string keys;
+    for (auto it = k->begin(); it != k->end(); ++it)
+      if (it.key() != "lightmaps") keys += std::string(keys.empty() ? "'" : ", '") + it.key() + "'";
+    if (!keys.empty())
+      warn("extras.kiln", "root extras.kiln is ignored (" + keys + "); put scene settings in " +
+                              where + ".extras.kiln");
+  }
+
   void convertSceneExtras(int sceneIndex) {
+    checkRootExtras(sceneIndex);
     std::string element = "scenes[" + std::to_string(sceneIndex) + "]";
     const Json* k = kilnExtras(array("scenes")[size_t(sceneIndex)], element);
     if (!k) return;
@@ -1257,6 +1749,7 @@ class Loader {
       if (auto v = x.number("shadowRadius", 0.0, 1e9, ">= 0")) l.shadowRadius = *v;
       if (auto v = x.number("shadowAngle", 0.0, 90.0, "in [0, 90] (degrees)")) l.shadowAngle = *v;
       if (auto v = x.integer("shadowSamples", 1, 65536, "in [1, 65536]")) l.shadowSamples = *v;
+      if (auto v = x.boolean("bakedShadows")) l.bakedShadows = *v;
       x.boolean("baked");  // kiln bake's mark in its output glTF, for viewers
       x.warnUnknown(this);
     }
@@ -1323,12 +1816,23 @@ class Loader {
     obj.meshIndex = n.mesh;
     obj.settings = settings;
 
+    // Skins: posed by the joints' world matrices (glTF ignores the skinned node's own
+    // transform); morph targets: the node's weights, else the mesh's default weights.
+    std::vector<glm::dmat4> joints;
+    if (n.skin >= 0) joints = jointMatrices(n.skin);
+    const std::vector<double>& weights = !n.weights.empty() ? n.weights : mesh.weights;
+    std::string weightsElement = !n.weights.empty() ? "nodes[" + std::to_string(node) + "].weights"
+                                                    : meshElement + ".weights";
+    for (double w : weights)
+      if (!std::isfinite(w)) fail(weightsElement, "must be finite numbers");
+
     DropCounts drops;
     std::vector<PrimitiveGeometry> prims;
     for (size_t j = 0; j < mesh.primitives.size(); ++j) {
       std::string element = meshElement + ".primitives[" + std::to_string(j) + "]";
       prims.push_back(convertPrimitive(mesh.primitives[j], element, positionMatrix, normalMatrix,
-                                       flip, &drops));
+                                       flip, n.skin >= 0 ? &joints : nullptr, weights,
+                                       weightsElement, &drops));
     }
 
     bool anyUv0 = false, allUv0 = true, anyUv1 = false, allUv1 = true;
@@ -1376,9 +1880,79 @@ class Loader {
     scene_.objects.push_back(std::move(obj));
   }
 
+  // Per joint of skins[skin]: the joint's world matrix times its inverse bind matrix.
+  std::vector<glm::dmat4> jointMatrices(int skin) const {
+    const tinygltf::Skin& sk = model_.skins[size_t(skin)];
+    std::string element = "skins[" + std::to_string(skin) + "]";
+    if (sk.joints.empty()) fail(element + ".joints", "must not be empty");
+    std::vector<double> ibm;
+    if (sk.inverseBindMatrices >= 0) {
+      std::string where = element + ".inverseBindMatrices";
+      if (size_t(sk.inverseBindMatrices) >= model_.accessors.size())
+        fail(where, "refers to a missing accessor");
+      const auto& a = model_.accessors[size_t(sk.inverseBindMatrices)];
+      if (a.type != TINYGLTF_TYPE_MAT4 || a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT)
+        fail(where, "must be a MAT4 FLOAT accessor");
+      if (a.count < sk.joints.size())
+        fail(where, "has " + std::to_string(a.count) + " matrices for " +
+                        std::to_string(sk.joints.size()) + " joints");
+      ibm = readAccessor(sk.inverseBindMatrices, 16, where);
+    }
+    std::vector<glm::dmat4> out(sk.joints.size());
+    for (size_t k = 0; k < sk.joints.size(); ++k) {
+      int j = sk.joints[k];
+      std::string where = element + ".joints[" + std::to_string(k) + "]";
+      if (j < 0 || size_t(j) >= model_.nodes.size()) fail(where, "must be a node index");
+      if (!inScene_[size_t(j)])
+        fail(where, "nodes[" + std::to_string(j) + "] is not in the scene being loaded");
+      glm::dmat4 inverseBind(1.0);
+      if (!ibm.empty()) {
+        inverseBind = glm::make_mat4(&ibm[16 * k]);
+        for (int c = 0; c < 16; ++c)
+          if (!std::isfinite(ibm[16 * k + size_t(c)])) fail(where, "inverse bind matrix is not finite");
+      }
+      out[k] = nodeWorld_[size_t(j)] * inverseBind;
+    }
+    return out;
+  }
+
+  // Accessor types per attribute: glTF 2.0 core plus KHR_mesh_quantization's integer forms.
+  enum class AttributeKind { Position, Normal, TexCoord, PositionTarget, NormalTarget };
+  void checkAttributeType(int accessor, AttributeKind kind, const std::string& use) const {
+    const auto& a = model_.accessors[size_t(accessor)];
+    int t = a.componentType;
+    bool n = a.normalized;
+    bool ok = t == TINYGLTF_COMPONENT_TYPE_FLOAT && !n;
+    bool i8 = t == TINYGLTF_COMPONENT_TYPE_BYTE, u8 = t == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+    bool i16 = t == TINYGLTF_COMPONENT_TYPE_SHORT, u16 = t == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT;
+    const char* allowed = "";
+    switch (kind) {
+      case AttributeKind::Position:
+      case AttributeKind::TexCoord:
+        ok |= i8 || u8 || i16 || u16;
+        allowed = "FLOAT, or (KHR_mesh_quantization) BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT";
+        break;
+      case AttributeKind::Normal:
+      case AttributeKind::NormalTarget:
+        ok |= (i8 || i16) && n;
+        allowed = "FLOAT, or (KHR_mesh_quantization) normalized BYTE or SHORT";
+        break;
+      case AttributeKind::PositionTarget:
+        ok |= i8 || i16;
+        allowed = "FLOAT, or (KHR_mesh_quantization) BYTE or SHORT";
+        break;
+    }
+    if (!ok)
+      fail("accessors[" + std::to_string(accessor) + "]",
+           use + " has componentType " + std::to_string(t) + (n ? " (normalized)" : "") +
+               "; it must be " + allowed);
+  }
+
   PrimitiveGeometry convertPrimitive(const tinygltf::Primitive& prim, const std::string& element,
                                      const mat4& positionMatrix, const mat3& normalMatrix,
-                                     bool flip, DropCounts* drops) {
+                                     bool flip, const std::vector<glm::dmat4>* joints,
+                                     const std::vector<double>& weights,
+                                     const std::string& weightsElement, DropCounts* drops) {
     int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
     if (mode >= TINYGLTF_MODE_POINTS && mode <= TINYGLTF_MODE_LINE_STRIP)
       fail(element, std::string("mode ") + modeName(mode) +
@@ -1391,14 +1965,42 @@ class Loader {
     };
     int posAccessor = attribute("POSITION");
     if (posAccessor < 0) fail(element, "has no POSITION attribute");
+    checkAttributeType(posAccessor, AttributeKind::Position, element + " POSITION");
     std::vector<double> pos = readAccessor(posAccessor, 3, element + " POSITION");
     size_t vertexCount = pos.size() / 3;
-    auto sameCount = [&](int accessor, const char* name) {
+    auto sameCount = [&](int accessor, const std::string& name) {
       if (model_.accessors[size_t(accessor)].count != vertexCount)
-        fail(element, std::string(name) + " (accessors[" + std::to_string(accessor) + "]) has " +
+        fail(element, name + " (accessors[" + std::to_string(accessor) + "]) has " +
                           std::to_string(model_.accessors[size_t(accessor)].count) +
                           " elements, POSITION has " + std::to_string(vertexCount));
     };
+
+    // Morph targets at the given weights, in the mesh's own space (before skin and node).
+    std::vector<double> normalOffset;
+    if (!weights.empty() && weights.size() != prim.targets.size())
+      fail(weightsElement, "has " + std::to_string(weights.size()) + " weights, but " + element +
+                               " has " + std::to_string(prim.targets.size()) + " morph targets");
+    for (size_t t = 0; t < prim.targets.size() && !weights.empty(); ++t) {
+      double w = weights[t];
+      if (w == 0.0) continue;
+      std::string where = element + ".targets[" + std::to_string(t) + "]";
+      for (const auto& [name, accessor] : prim.targets[t]) {
+        bool isPosition = name == "POSITION", isNormal = name == "NORMAL";
+        if (!isPosition && !isNormal) continue;  // TANGENT: kiln reads no tangents
+        checkAttributeType(accessor,
+                           isPosition ? AttributeKind::PositionTarget : AttributeKind::NormalTarget,
+                           where + " " + name);
+        sameCount(accessor, where + " " + name);
+        std::vector<double> delta = readAccessor(accessor, 3, where + " " + name);
+        std::vector<double>& dst = isPosition ? pos : normalOffset;
+        if (dst.empty()) dst.assign(3 * vertexCount, 0.0);
+        for (size_t k = 0; k < dst.size(); ++k) dst[k] += w * delta[k];
+      }
+    }
+
+    // Skin: per vertex, the weighted sum of its joints' matrices.
+    std::vector<glm::dmat4> skinMatrix;
+    if (joints) skinMatrix = vertexSkinMatrices(prim, element, vertexCount, *joints);
 
     PrimitiveGeometry g;
     g.material = prim.material >= 0 ? uint32_t(prim.material) : defaultMaterialIndex();
@@ -1431,8 +2033,9 @@ class Loader {
     // World positions.
     std::vector<vec3> positions(vertexCount);
     for (size_t v = 0; v < vertexCount; ++v) {
-      vec3 p = vec3(float(pos[3 * v]), float(pos[3 * v + 1]), float(pos[3 * v + 2]));
-      positions[v] = vec3(positionMatrix * vec4(p, 1.0f));
+      vec3 p{float(pos[3 * v]), float(pos[3 * v + 1]), float(pos[3 * v + 2])};
+      positions[v] = joints ? vec3(skinMatrix[v] * glm::dvec4(glm::dvec3(p), 1.0))
+                            : vec3(positionMatrix * vec4(p, 1.0f));
     }
     pos = {};
 
@@ -1440,7 +2043,8 @@ class Loader {
     std::vector<uvec3> kept;
     kept.reserve(tris.size());
     for (uvec3 t : tris) {
-      if (flip) std::swap(t.y, t.z);
+      // A skinned triangle's facing follows its first vertex's matrix.
+      if (joints ? glm::determinant(glm::dmat3(skinMatrix[t.x])) < 0.0 : flip) std::swap(t.y, t.z);
       vec3 a = positions[t.x], b = positions[t.y], c = positions[t.z];
       if (!isFinite(a) || !isFinite(b) || !isFinite(c)) {
         ++drops->nonFinite;
@@ -1490,11 +2094,13 @@ class Loader {
     int normalAccessor = attribute("NORMAL");
     if (normalAccessor >= 0) {
       sameCount(normalAccessor, "NORMAL");
+      checkAttributeType(normalAccessor, AttributeKind::Normal, element + " NORMAL");
       std::vector<double> nrm = readAccessor(normalAccessor, 3, element + " NORMAL");
+      for (size_t k = 0; k < normalOffset.size(); ++k) nrm[k] += normalOffset[k];
       for (size_t v = 0; v < used.size(); ++v) {
         size_t s = used[v];
-        vec3 nw =
-            normalMatrix * vec3(float(nrm[3 * s]), float(nrm[3 * s + 1]), float(nrm[3 * s + 2]));
+        vec3 local{float(nrm[3 * s]), float(nrm[3 * s + 1]), float(nrm[3 * s + 2])};
+        vec3 nw = joints ? cofactorNormalMatrix(mat3(skinMatrix[s])) * local : normalMatrix * local;
         float len = glm::length(nw);
         if (len > 0.0f && std::isfinite(len)) {
           g.normals[v] = nw / len;
@@ -1521,13 +2127,81 @@ class Loader {
       fail(element, std::string(name) + " (accessors[" + std::to_string(accessor) + "]) has " +
                         std::to_string(model_.accessors[size_t(accessor)].count) +
                         " elements, POSITION has " + std::to_string(vertexCount));
+    checkAttributeType(accessor, AttributeKind::TexCoord, element + " " + name);
     std::vector<double> uv = readAccessor(accessor, 2, element + " " + name);
     out->resize(used.size());
     for (size_t v = 0; v < used.size(); ++v) {
-      vec2 t = vec2(float(uv[2 * used[v]]), float(uv[2 * used[v] + 1]));
+      vec2 t{float(uv[2 * used[v]]), float(uv[2 * used[v] + 1])};
       (*out)[v] = std::isfinite(t.x) && std::isfinite(t.y) ? t : vec2(0.0f);
     }
     return true;
+  }
+
+  // The normal matrix of a linear map: its cofactor matrix (the inverse transpose times det),
+  // negated for a mirroring map so that normals keep their side.
+  static mat3 cofactorNormalMatrix(const mat3& linear) {
+    mat3 cofactor(glm::cross(linear[1], linear[2]), glm::cross(linear[2], linear[0]),
+                  glm::cross(linear[0], linear[1]));
+    return glm::determinant(linear) < 0.0f ? -cofactor : cofactor;
+  }
+
+  // Per vertex: sum over JOINTS_n/WEIGHTS_n of weight x joint matrix (weights renormalised to
+  // sum 1, as glTF expects of exporters).
+  std::vector<glm::dmat4> vertexSkinMatrices(const tinygltf::Primitive& prim,
+                                             const std::string& element, size_t vertexCount,
+                                             const std::vector<glm::dmat4>& joints) const {
+    std::vector<glm::dmat4> out(vertexCount, glm::dmat4(0.0));
+    std::vector<double> sum(vertexCount, 0.0);
+    int sets = 0;
+    for (;; ++sets) {
+      auto find = [&](const std::string& name) {
+        auto it = prim.attributes.find(name);
+        return it == prim.attributes.end() ? -1 : it->second;
+      };
+      std::string jn = "JOINTS_" + std::to_string(sets), wn = "WEIGHTS_" + std::to_string(sets);
+      int ja = find(jn), wa = find(wn);
+      if (ja < 0 && wa < 0) break;
+      if (ja < 0 || wa < 0) fail(element, "has only one of " + jn + " and " + wn);
+      for (auto [acc, name] : {std::pair{ja, jn}, std::pair{wa, wn}})
+        if (model_.accessors[size_t(acc)].count != vertexCount)
+          fail(element, name + " (accessors[" + std::to_string(acc) + "]) has " +
+                            std::to_string(model_.accessors[size_t(acc)].count) +
+                            " elements, POSITION has " + std::to_string(vertexCount));
+      const auto& ja_ = model_.accessors[size_t(ja)];
+      if (ja_.normalized || (ja_.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+                             ja_.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT))
+        fail("accessors[" + std::to_string(ja) + "]",
+             element + " " + jn + " must be UNSIGNED_BYTE or UNSIGNED_SHORT");
+      const auto& wa_ = model_.accessors[size_t(wa)];
+      if (!(wa_.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+            (wa_.normalized && (wa_.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                wa_.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT))))
+        fail("accessors[" + std::to_string(wa) + "]",
+             element + " " + wn + " must be FLOAT or normalized UNSIGNED_BYTE/SHORT");
+      std::vector<double> j = readAccessor(ja, 4, element + " " + jn);
+      std::vector<double> w = readAccessor(wa, 4, element + " " + wn);
+      for (size_t v = 0; v < vertexCount; ++v)
+        for (size_t c = 0; c < 4; ++c) {
+          double weight = w[4 * v + c];
+          if (weight == 0.0) continue;
+          if (!std::isfinite(weight) || weight < 0.0)
+            fail(element, wn + "[" + std::to_string(v) + "] must be finite and >= 0");
+          size_t joint = size_t(j[4 * v + c]);
+          if (joint >= joints.size())
+            fail(element, jn + "[" + std::to_string(v) + "] = " + std::to_string(joint) +
+                              ", but the skin has " + std::to_string(joints.size()) + " joints");
+          out[v] += joints[joint] * weight;
+          sum[v] += weight;
+        }
+    }
+    if (sets == 0)
+      fail(element, "belongs to a skinned node but has no JOINTS_0/WEIGHTS_0");
+    for (size_t v = 0; v < vertexCount; ++v) {
+      if (!(sum[v] > 0.0))
+        fail(element, "vertex " + std::to_string(v) + " has no joint weight (all WEIGHTS are 0)");
+      out[v] /= sum[v];
+    }
+    return out;
   }
 
   // Vertex normals weighted by each corner's angle times its triangle's area (the cross
@@ -1563,16 +2237,36 @@ class Loader {
 
   std::string path_;
   LoadOptions options_;
+  size_t texturesUsed_ = 0;  // countUsedTextures(), once, when progress is reported
   std::string baseDir_;
   std::vector<uint8_t> bytes_;
   bool isGlb_ = false;
   uint64_t glbBinSize_ = 0;
   Json doc_;
   std::vector<uint64_t> bufferLengths_;
+  std::vector<bool> noDataBuffer_;  // EXT_meshopt_compression fallback buffers without data
+  enum class MeshoptMode { Attributes, Triangles, Indices };
+  enum class MeshoptFilter { None, Octahedral, Quaternion, Exponential };
+  struct MeshoptView {
+    size_t view = 0;
+    uint64_t buffer = 0, offset = 0, length = 0, stride = 0, count = 0;
+    uint64_t viewLength = 0;  // the bufferView's byteLength: the decoded size
+    MeshoptMode mode = MeshoptMode::Attributes;
+    MeshoptFilter filter = MeshoptFilter::None;
+  };
+  std::vector<MeshoptView> meshopt_;
+  struct ViewlessIndices {
+    size_t mesh = 0, primitive = 0;
+    int accessor = -1;
+  };
+  std::vector<ViewlessIndices> viewlessIndices_;
+  std::set<size_t> isMeshoptView_;
   tinygltf::Model model_;
   std::map<int, int> textureMap_;
   mutable uint64_t zeroElementsRead_ = 0;  // see readAccessor
   std::map<std::tuple<int, int, int, bool>, int> decodedImages_;  // (image, sampler) -> texture
+  std::vector<glm::dmat4> nodeWorld_;  // world matrices of the loaded scene's nodes
+  std::vector<bool> inScene_;
   bool defaultMaterialUsed_ = false;
   Scene scene_;
 };

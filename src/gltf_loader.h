@@ -7,7 +7,9 @@
 // generated, a missing texture image replaced by its factor.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -21,6 +23,14 @@ namespace kiln {
 struct LoadOptions {
   bool loadTextures = true;  // false: skip image decoding (materials use their factors)
   bool loadSkyMap = true;    // false: leave an equirectangular sky map unloaded
+  // Texture decoding can take tens of seconds on a big scene: called after each texture the
+  // materials use is decoded, with how many are done and how many there are (the CLI's
+  // progress line; the loader itself prints nothing).
+  std::function<void(size_t done, size_t total)> textureProgress;
+  // Polled before each texture is decoded; when it becomes true loading stops with an Error
+  // "cancelled" (Ctrl-C).
+  const std::atomic<bool>* cancel = nullptr;
+  int scene = -1;            // the glTF scene to load; -1 = the file's default (`scene`, else 0)
 };
 
 Result<Scene> loadScene(const std::string& path, const LoadOptions& options = {});

@@ -151,6 +151,8 @@ Integrator::Integrator(const Scene& scene, const Tracer& tracer, IntegratorSetti
   std::vector<float> power;
   for (uint32_t o = 0; o < scene.objects.size(); ++o) {
     const Object& object = scene.objects[o];
+    // An object the tracer does not hold (a dynamic one, for a bake) emits into nothing.
+    if (!tracer.contains(o)) continue;
     for (uint32_t t = 0; t < object.triangles.size(); ++t) {
       const Material& m = scene.materials[object.triangleMaterial[t]];
       if (!m.isEmissive()) continue;
@@ -209,11 +211,13 @@ uint64_t Integrator::threadRayCount() { return tRayCount; }
 // One shadow ray: rgb transmittance along origin + t direction, t in (0, tMax). BLEND
 // surfaces attenuate (Tracer::transmittance) only when the scene has any, since a plain
 // occlusion query is cheaper.
-vec3 Integrator::transmittance(vec3 origin, vec3 direction, float tMax) const {
+// `kind` is LightShadow for punctual lights' shadow rays (objects with castShadows false let
+// them through).
+vec3 Integrator::transmittance(vec3 origin, vec3 direction, float tMax, RayKind kind) const {
   ++tRayCount;
   Ray ray{origin, direction, 0.0f, tMax};
-  if (tracer_.hasTranslucentSurfaces()) return tracer_.transmittance(ray);
-  return tracer_.occluded(ray) ? vec3(0.0f) : vec3(1.0f);
+  if (tracer_.hasTranslucentSurfaces()) return tracer_.transmittance(ray, kind);
+  return tracer_.occluded(ray, kind) ? vec3(0.0f) : vec3(1.0f);
 }
 
 // Mean transmittance from `origin` to light `light` over `rays` shadow rays. Hard shadows:
@@ -222,14 +226,19 @@ vec3 Integrator::transmittance(vec3 origin, vec3 direction, float tMax) const {
 // disk of radius shadowRadius centred on the light and facing the origin; directional rays
 // go uniformly over the cone of full angle shadowAngle around -direction. Ray r uses sample
 // firstIndex + r of the stream keyed by (key, light) at `dimension`, so the rays of
-// consecutive samples together form one stratified Sobol set.
+// consecutive samples together form one stratified Sobol set. A light with bakedShadows
+// false (and not realtime) is visible from everywhere: no ray. Shadow rays pass objects with
+// castShadows false.
 vec3 Integrator::visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_t firstIndex,
                               uint32_t rays, uint32_t dimension) const {
   const Light& l = scene_.lights[light];
+  if (!l.bakedShadows && l.mode != LightMode::Realtime && settings_.honourBakedShadows)
+    return vec3(1.0f);
+  constexpr RayKind kShadow = RayKind::LightShadow;
   const bool directional = l.type == LightType::Directional;
   if (!isSoft(l)) {
-    if (directional) return transmittance(origin, -l.direction, kInfinity);
-    return transmittance(origin, l.position - origin, 1.0f - kShadowEpsilon);
+    if (directional) return transmittance(origin, -l.direction, kInfinity, kShadow);
+    return transmittance(origin, l.position - origin, 1.0f - kShadowEpsilon, kShadow);
   }
   rays = std::max(1u, rays);
   const uint64_t streamKey = hashValues(key, kShadowTag, light);
@@ -242,7 +251,7 @@ vec3 Integrator::visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_
       SampleStream stream(streamKey, firstIndex + r);
       stream.setDimension(2 * dimension);
       vec3 dir = frame.toWorld(squareToUniformCone(stream.get2D(), cosMax));
-      sum += transmittance(origin, dir, kInfinity);
+      sum += transmittance(origin, dir, kInfinity, kShadow);
     }
   } else {
     vec3 toOrigin = origin - l.position;
@@ -253,7 +262,7 @@ vec3 Integrator::visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_
       stream.setDimension(2 * dimension);
       vec2 d = l.shadowRadius * squareToConcentricDisk(stream.get2D());
       vec3 target = l.position + d.x * frame.t + d.y * frame.b;
-      sum += transmittance(origin, target - origin, 1.0f - kShadowEpsilon);
+      sum += transmittance(origin, target - origin, 1.0f - kShadowEpsilon, kShadow);
     }
   }
   return sum / float(rays);

@@ -14,6 +14,13 @@
 // Units: irradiance E in W/m^2 (lux in glTF's photometric reading, no 683 factor);
 // radiance L in W/(m^2 sr). A lightmap texel stores E / pi.
 // Determinism: every estimate is a pure function of its arguments (see sampling.h).
+// What takes part: the objects the Tracer holds (a baking Tracer holds static objects only,
+// src/tracer.h), so emissive triangles of objects it leaves out are no emitters either.
+// Shadows: the shadow rays of punctual lights pass objects with castShadows false
+// (RayKind::LightShadow) and are not traced at all for a light with bakedShadows false
+// (visibility 1); sky and emitter samples are shadowed by every surface the tracer holds,
+// since their light is also found by the paths, which hit such objects (a shadow ray that
+// ignored an object that the path hits would count its light twice).
 #pragma once
 
 #include <memory>
@@ -39,6 +46,9 @@ struct IntegratorSettings {
   std::vector<bool> indirectLights;
   bool includeSky = true;
   bool includeEmissive = true;
+  // Whether Light::bakedShadows applies (lights that are not realtime). The preview renderer
+  // turns it off for its run-time direct light, whose shadows are the engine's.
+  bool honourBakedShadows = true;
 };
 
 // An estimate split into the light that arrives without bouncing and the rest.
@@ -111,7 +121,7 @@ class Integrator {
   struct MaterialTable;
   enum class ShadowKind { Any, Hard, Soft };
   // Helpers, defined and documented in integrator.cpp.
-  vec3 transmittance(vec3 origin, vec3 direction, float tMax) const;
+  vec3 transmittance(vec3 origin, vec3 direction, float tMax, RayKind kind = RayKind::Any) const;
   vec3 visibilityTo(uint32_t light, vec3 origin, uint64_t key, uint32_t firstIndex, uint32_t rays,
                     uint32_t dimension) const;
   vec3 punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, ShadowKind kind, uint64_t key,

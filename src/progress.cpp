@@ -85,10 +85,33 @@ void Progress::finish() {
   if (enabled_) print(true);
 }
 
+Progress::Busy::Busy(Progress& progress) : progress_(progress) {
+  std::lock_guard<std::mutex> lock(progress_.mutex_);
+  progress_.measuresBusy_ = true;
+  progress_.busyOpen_ = true;
+  progress_.busyStart_ = std::chrono::steady_clock::now();
+}
+
+Progress::Busy::~Busy() {
+  std::lock_guard<std::mutex> lock(progress_.mutex_);
+  progress_.busySeconds_ +=
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - progress_.busyStart_)
+          .count();
+  progress_.busyOpen_ = false;
+}
+
+// Caller holds mutex_.
+double Progress::elapsedSeconds() const {
+  const auto now = std::chrono::steady_clock::now();
+  if (!measuresBusy_) return std::chrono::duration<double>(now - start_).count();
+  return busySeconds_ +
+         (busyOpen_ ? std::chrono::duration<double>(now - busyStart_).count() : 0.0);
+}
+
 // Caller holds mutex_.
 void Progress::print(bool final) {
   size_t done = std::min(done_.load(std::memory_order_relaxed), total_);
-  double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  double elapsed = elapsedSeconds();
   double fraction = total_ > 0 ? double(done) / double(total_) : 1.0;
   double rate = elapsed > 0 ? double(done) / elapsed : 0.0;
   char line[256];

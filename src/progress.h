@@ -22,7 +22,23 @@ class Progress {
   void finish();
   size_t done() const { return done_.load(std::memory_order_relaxed); }
 
+  // For an operation done in pieces interleaved with others (the post-processing steps, page
+  // by page): once a Busy has been made, the rate, ETA and total time count only the time
+  // spent while one was alive, not the time since construction. One at a time.
+  class Busy {
+   public:
+    explicit Busy(Progress& progress);
+    ~Busy();
+    Busy(const Busy&) = delete;
+    Busy& operator=(const Busy&) = delete;
+
+   private:
+    Progress& progress_;
+  };
+  Busy busy() { return Busy(*this); }
+
  private:
+  double elapsedSeconds() const;  // caller holds mutex_
   void print(bool final);
   std::string label_, unit_;
   size_t total_;
@@ -30,6 +46,10 @@ class Progress {
   bool finished_ = false;
   std::atomic<size_t> done_{0};
   std::chrono::steady_clock::time_point start_, lastPrint_;
+  bool measuresBusy_ = false;  // a Busy was made: elapsed = busySeconds_ (+ the open one)
+  bool busyOpen_ = false;
+  double busySeconds_ = 0.0;
+  std::chrono::steady_clock::time_point busyStart_;
   std::mutex mutex_;
 };
 

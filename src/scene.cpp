@@ -86,7 +86,7 @@ vec4 Scene::baseColorAt(uint32_t object, uint32_t triangle, vec2 bary) const {
   vec4 color = m.baseColorFactor;
   if (m.baseColorTexture >= 0) {
     vec2 uv = texCoordAt(objects[object], triangle, bary, m.baseColorTexCoord);
-    color *= textures[m.baseColorTexture].sample(uv);
+    color *= textures[m.baseColorTexture].sample(m.baseColorTransform.apply(uv));
   }
   return color;
 }
@@ -96,7 +96,7 @@ vec3 Scene::emissionAt(uint32_t object, uint32_t triangle, vec2 bary) const {
   vec3 emission = m.emissiveFactor * m.emissiveStrength;
   if (m.emissiveTexture >= 0 && maxComponent(emission) > 0.0f) {
     vec2 uv = texCoordAt(objects[object], triangle, bary, m.emissiveTexCoord);
-    emission *= vec3(textures[m.emissiveTexture].sample(uv));
+    emission *= vec3(textures[m.emissiveTexture].sample(m.emissiveTransform.apply(uv)));
   }
   return emission;
 }

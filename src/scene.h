@@ -24,6 +24,7 @@ struct Material {
   vec4 baseColorFactor{1.0f};
   int baseColorTexture = -1;  // index into Scene::textures, -1 = none
   int baseColorTexCoord = 0;  // which UV set the texture uses (0 or 1)
+  TextureTransform baseColorTransform;  // KHR_texture_transform (also the cutout's alpha)
   float metallic = 1.0f;      // glTF defaults
   float roughness = 1.0f;
   AlphaMode alphaMode = AlphaMode::Opaque;
@@ -32,6 +33,7 @@ struct Material {
   vec3 emissiveFactor{0.0f};
   int emissiveTexture = -1;
   int emissiveTexCoord = 0;
+  TextureTransform emissiveTransform;
   float emissiveStrength = 1.0f;  // KHR_materials_emissive_strength
 
   bool isEmissive() const { return maxComponent(emissiveFactor) * emissiveStrength > 0.0f; }
@@ -40,8 +42,16 @@ struct Material {
 // Per-node settings from the node's extras.kiln (MISSION.md "Scene input").
 enum class ReceiveGI { Lightmaps, Probes };
 struct ObjectSettings {
-  bool isStatic = true;          // "static": contributes GI and gets a lightmap
+  // "static" (Unity's Contribute GI): a static object casts shadows, bounces and emits light
+  // into the baked data (lightmaps, probes, probe placement and visibility) and can get a
+  // lightmap. A dynamic one (false) is left out of every bake (the baking Tracer does not
+  // hold it, src/tracer.h), gets no lightmap and is lit by the probes at run time.
+  bool isStatic = true;
   float scaleInLightmap = 1.0f;  // 0 = no lightmap, still casts and bounces
+  // "castShadows" (Beast's Cast Shadows): false = the object does not block the shadow rays
+  // of punctual lights (KHR_lights_punctual), its own included; it still gets a lightmap,
+  // bounces light, emits, and blocks every other ray (paths, sky and emitter samples).
+  bool castShadows = true;
   ReceiveGI receiveGI = ReceiveGI::Lightmaps;
   bool lppv = false;  // use a light probe proxy volume (dynamic objects)
 };
@@ -86,6 +96,10 @@ struct Light {
   float shadowRadius = 0.0f;     // metres, point/spot soft shadows (0 = hard)
   float shadowAngle = 0.0f;      // degrees, directional soft shadows: the cone's full angle
   int shadowSamples = 1;         // shadow rays per light evaluation
+  // "bakedShadows" (Beast's per-light Cast Shadows): false = this light's baked light
+  // (direct, bounced, shadowmask, probe occlusion) ignores occlusion: no shadow rays. Realtime
+  // lights are never baked and keep their shadows.
+  bool bakedShadows = true;
 
   // Radiance-free description of what reaches a point: irradiance on a surface facing the
   // light (lux, i.e. W/m^2 in kiln's units) before visibility, at world point p. Zero

@@ -1,6 +1,7 @@
 // texture.h: material textures, decoded to linear float RGBA and sampled with glTF samplers.
 #pragma once
 
+#include <cmath>
 #include <string>
 
 #include "src/image.h"
@@ -15,6 +16,21 @@ struct TextureSampler {
   Wrap wrapS = Wrap::Repeat;
   Wrap wrapT = Wrap::Repeat;
   bool nearest = false;  // magFilter NEAREST; otherwise bilinear
+};
+
+// KHR_texture_transform on one textureInfo: uv' = T(offset) * R(rotation) * S(scale) * uv, with
+// the ratified extension's rotation (counter-clockwise in UV space: u' = cos u + sin v,
+// v' = -sin u + cos v, which turns the image clockwise). Identity when absent.
+struct TextureTransform {
+  vec2 offset{0.0f};
+  float rotation = 0.0f;  // radians
+  vec2 scale{1.0f};
+
+  vec2 apply(vec2 uv) const {
+    const float c = std::cos(rotation), s = std::sin(rotation);
+    const vec2 p = uv * scale;
+    return vec2(c * p.x + s * p.y, -s * p.x + c * p.y) + offset;
+  }
 };
 
 // A texture as a material uses it: an RGBA image in linear values (colour textures are

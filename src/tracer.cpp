@@ -19,16 +19,27 @@ namespace {
 struct GeometryData {
   const Scene* scene = nullptr;
   uint32_t object = 0;
+  bool castsShadows = true;  // Object::settings.castShadows
+};
+
+// The context of every closest-hit query: Embree hands it to the intersection filter, which
+// with lightShadow set lets rays pass objects that cast no shadows (the transmittance walk
+// of a punctual light's shadow ray).
+struct IntersectContext {
+  RTCIntersectContext base;  // first member: Embree's pointer to it is a pointer to this
+  bool lightShadow = false;
 };
 
 // The context of every occlusion query: Embree hands it to the occlusion filter, which
 // with opaqueOnly set lets rays pass BLEND surfaces (noting that one was there) instead of
 // stopping at them, so that transmittance() needs no closest-hit walk for the segments an
 // opaque surface blocks.
+// lightShadow lets rays pass objects that cast no shadows, as above.
 struct OcclusionContext {
   RTCIntersectContext base;  // first member: Embree's pointer to it is a pointer to this
   bool opaqueOnly = false;
   bool sawBlend = false;
+  bool lightShadow = false;
 };
 
 // A hit on a MASK triangle whose alpha (base colour factor x texture at UV0) is below the
@@ -47,8 +58,13 @@ bool cutOut(const Scene& scene, uint32_t object, uint32_t prim, vec2 bary) {
 // more than once for one primitive is harmless.
 void intersectFilter(const RTCFilterFunctionNArguments* args) {
   const auto* data = static_cast<const GeometryData*>(args->geometryUserPtr);
+  const auto* context = reinterpret_cast<const IntersectContext*>(args->context);
   for (unsigned int i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;  // inactive lane: its hit data is undefined
+    if (context->lightShadow && !data->castsShadows) {
+      args->valid[i] = 0;
+      continue;
+    }
     const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
     const vec2 bary(RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i));
     if (cutOut(*data->scene, data->object, prim, bary)) args->valid[i] = 0;
@@ -61,6 +77,10 @@ void occlusionFilter(const RTCFilterFunctionNArguments* args) {
   const Scene& scene = *data->scene;
   for (unsigned int i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
+    if (context->lightShadow && !data->castsShadows) {
+      args->valid[i] = 0;
+      continue;
+    }
     const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
     const vec2 bary(RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i));
     if (cutOut(scene, data->object, prim, bary)) {
@@ -192,7 +212,7 @@ struct Tracer::Impl {
 Tracer::Tracer(const Scene& scene) : scene_(scene), impl_(std::make_unique<Impl>()) {}
 Tracer::~Tracer() = default;
 
-Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
+Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene, TracerGeometry geometry) {
   const std::string where = scene.path.empty() ? std::string("scene") : scene.path;
 
   // Validate what the filter function and the buffers index, so that a malformed scene is an
@@ -220,6 +240,11 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
 
   std::unique_ptr<Tracer> tracer(new Tracer(scene));
   Impl& impl = *tracer->impl_;
+  tracer->geometry_ = geometry;
+  tracer->contains_.resize(scene.objects.size());
+  for (size_t o = 0; o < scene.objects.size(); ++o)
+    tracer->contains_[o] = !scene.objects[o].triangles.empty() &&
+                           (geometry == TracerGeometry::All || scene.objects[o].settings.isStatic);
 
   impl.device = rtcNewDevice(nullptr);
   if (!impl.device)
@@ -263,10 +288,12 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
   }
   for (uint32_t o = 0; o < scene.objects.size(); ++o) {
     const Object& obj = scene.objects[o];
-    impl.geometryData[o] = GeometryData{&scene, o};
-    // Objects without triangles get no geometry; IDs stay equal to object indices because
-    // geometries are attached by ID (Embree allows gaps).
-    if (obj.triangles.empty()) continue;
+    impl.geometryData[o] = GeometryData{&scene, o, obj.settings.castShadows};
+    // Objects without triangles, and those `geometry` leaves out, get no geometry; IDs stay
+    // equal to object indices because geometries are attached by ID (Embree allows gaps).
+    // Leaving a dynamic object out of the BVH (rather than filtering its hits) makes a bake
+    // with it the same computation as one without it: the same BVH over the same triangles.
+    if (!tracer->contains_[o]) continue;
 
     RTCGeometry geom = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
     // Embree over-allocates buffers it creates so that the last vertex can be read with a
@@ -293,9 +320,10 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
       indices[3 * i + 2] = obj.triangles[i].z;
     }
     const bool cutouts = mayBeCutOut(scene, obj), blend = hasBlendTriangles(scene, obj);
-    if (cutouts || blend) rtcSetGeometryUserData(geom, &impl.geometryData[o]);
-    if (cutouts) rtcSetGeometryIntersectFilterFunction(geom, &intersectFilter);
-    if (cutouts || blend) rtcSetGeometryOccludedFilterFunction(geom, &occlusionFilter);
+    const bool noShadows = !obj.settings.castShadows;
+    if (cutouts || blend || noShadows) rtcSetGeometryUserData(geom, &impl.geometryData[o]);
+    if (cutouts || noShadows) rtcSetGeometryIntersectFilterFunction(geom, &intersectFilter);
+    if (cutouts || blend || noShadows) rtcSetGeometryOccludedFilterFunction(geom, &occlusionFilter);
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl.rtcScene, geom, o);
     rtcReleaseGeometry(geom);  // the scene holds its own reference
@@ -305,7 +333,8 @@ Result<std::unique_ptr<Tracer>> Tracer::create(const Scene& scene) {
 
   // Only materials some triangle uses count: an unused BLEND material must not cost every
   // shadow ray the slow transmittance walk.
-  for (const Object& obj : scene.objects) tracer->hasBlend_ |= hasBlendTriangles(scene, obj);
+  for (uint32_t o = 0; o < scene.objects.size(); ++o)
+    if (tracer->contains_[o]) tracer->hasBlend_ |= hasBlendTriangles(scene, scene.objects[o]);
   return tracer;
 }
 
@@ -316,11 +345,16 @@ std::optional<Hit> Tracer::intersect(const Ray& ray) const {
 }
 
 bool Tracer::intersect(const Ray& ray, Hit& hit) const {
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
+  return intersectQuery(ray, hit, RayKind::Any);
+}
+
+bool Tracer::intersectQuery(const Ray& ray, Hit& hit, RayKind kind) const {
+  IntersectContext context;
+  rtcInitIntersectContext(&context.base);
+  context.lightShadow = kind == RayKind::LightShadow;
   RTCRayHit rh = makeRayHit(ray);
   capture(ray, true);
-  rtcIntersect1(impl_->rtcScene, &context, &rh);
+  rtcIntersect1(impl_->rtcScene, &context.base, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
 
   hit.t = rh.ray.tfar;
@@ -350,17 +384,19 @@ bool occludedQuery(RTCScene scene, const Ray& ray, OcclusionContext& context) {
 }
 }  // namespace
 
-bool Tracer::occluded(const Ray& ray) const {
+bool Tracer::occluded(const Ray& ray, RayKind kind) const {
   OcclusionContext context;
+  context.lightShadow = kind == RayKind::LightShadow;
   return occludedQuery(impl_->rtcScene, ray, context);
 }
 
-vec3 Tracer::transmittance(const Ray& ray) const {
-  if (!hasBlend_) return occluded(ray) ? vec3(0.0f) : vec3(1.0f);
+vec3 Tracer::transmittance(const Ray& ray, RayKind kind) const {
+  if (!hasBlend_) return occluded(ray, kind) ? vec3(0.0f) : vec3(1.0f);
   // One any-hit query that passes BLEND surfaces: an opaque surface anywhere on the segment
   // makes it 0 whatever it crosses first; a segment that met no BLEND surface is clear.
   OcclusionContext context;
   context.opaqueOnly = true;
+  context.lightShadow = kind == RayKind::LightShadow;
   if (occludedQuery(impl_->rtcScene, ray, context)) return vec3(0.0f);
   if (!context.sawBlend) return vec3(1.0f);
 
@@ -370,8 +406,9 @@ vec3 Tracer::transmittance(const Ray& ray) const {
   vec3 result(1.0f);
   Ray segment = ray;
   for (int i = 0; i < kMaxBlendCrossings; ++i) {
-    std::optional<Hit> hit = intersect(segment);
-    if (!hit) return result;
+    Hit h;
+    if (!intersectQuery(segment, h, kind)) return result;
+    const Hit* hit = &h;
     const Material& m = scene_.materialOf(hit->object, hit->triangle);
     if (m.alphaMode != AlphaMode::Blend) return vec3(0.0f);  // at the segment's very end
     vec4 base = scene_.baseColorAt(hit->object, hit->triangle, hit->bary);

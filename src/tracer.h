@@ -9,6 +9,12 @@
 //     through it, multiplied by (1 - alpha) x baseColor.rgb (coloured transparency, as
 //     Beast's RGB transparency did);
 //   - everything else is an opaque surface, both faces.
+// Which objects the Embree scene holds (TracerGeometry): a Tracer for baking holds only the
+// static objects (Unity's rule: only static objects contribute to baked GI; dynamic ones are
+// lit by the probes), so a dynamic object casts no baked shadow, bounces and emits nothing
+// into lightmaps or probes and does not move or invalidate probes; the preview renderer
+// builds one over every object. Objects with castShadows false are held but let the shadow
+// rays of punctual lights through (RayKind::LightShadow).
 #pragma once
 
 #include <memory>
@@ -37,10 +43,22 @@ struct Hit {
   bool backFace = false;       // the ray arrived at the back side: dot(direction, Ng) > 0
 };
 
+// The objects a Tracer's Embree scene holds.
+enum class TracerGeometry {
+  BakedGI,  // static objects only (Object::settings.isStatic): every bake's view of the scene
+  All,      // every object: what a camera sees (the preview renderer)
+};
+
+// What a query is for, where it matters: the shadow rays of punctual lights pass through
+// objects with castShadows false; every other query sees them.
+enum class RayKind { Any, LightShadow };
+
 class Tracer {
  public:
-  // Builds the acceleration structure. `scene` must outlive the Tracer.
-  static Result<std::unique_ptr<Tracer>> create(const Scene& scene);
+  // Builds the acceleration structure over the objects `geometry` selects. `scene` must
+  // outlive the Tracer. Hit::object stays the index into Scene::objects either way.
+  static Result<std::unique_ptr<Tracer>> create(const Scene& scene,
+                                                TracerGeometry geometry = TracerGeometry::BakedGI);
   ~Tracer();
   Tracer(const Tracer&) = delete;
   Tracer& operator=(const Tracer&) = delete;
@@ -51,12 +69,18 @@ class Tracer {
   // (and `hit` unchanged) otherwise. Saves the optional's copy on hot paths.
   bool intersect(const Ray& ray, Hit& hit) const;
   // True when anything (including BLEND surfaces) lies in (tMin, tMax).
-  bool occluded(const Ray& ray) const;
+  bool occluded(const Ray& ray, RayKind kind = RayKind::Any) const;
   // Fraction of light that passes along the segment: 0 when an opaque surface lies in
   // (tMin, tMax), else the product over the BLEND surfaces crossed.
-  vec3 transmittance(const Ray& ray) const;
+  vec3 transmittance(const Ray& ray, RayKind kind = RayKind::Any) const;
 
+  // Over the objects held only.
   bool hasTranslucentSurfaces() const { return hasBlend_; }
+  // Whether Scene::objects[object] is in the Embree scene (can be hit at all).
+  bool contains(uint32_t object) const {
+    return object < contains_.size() && contains_[object];
+  }
+  TracerGeometry geometry() const { return geometry_; }
 
   // The surface point nearest to p within maxDistance (Embree's BVH point query, exact
   // point-triangle distances), over every triangle: cut-out and BLEND ones count as surfaces.
@@ -81,10 +105,13 @@ class Tracer {
 
  private:
   explicit Tracer(const Scene& scene);
+  bool intersectQuery(const Ray& ray, Hit& hit, RayKind kind) const;
   struct Impl;
   const Scene& scene_;
   std::unique_ptr<Impl> impl_;
   bool hasBlend_ = false;
+  TracerGeometry geometry_ = TracerGeometry::BakedGI;
+  std::vector<bool> contains_;  // per object
 };
 
 }  // namespace kiln

@@ -885,8 +885,8 @@ TEST_F(GltfLoaderTest, NodeCyclesAndSharedChildrenAreErrors) {
 
 TEST_F(GltfLoaderTest, UnsupportedRequiredExtension) {
   GltfBuilder b = quadScene();
-  b.doc["extensionsRequired"] = {"KHR_lights_punctual", "KHR_draco_mesh_compression"};
-  expectError(b.writeGltf(dir), {"extensionsRequired", "KHR_draco_mesh_compression",
+  b.doc["extensionsRequired"] = {"KHR_lights_punctual", "EXT_mesh_gpu_instancing"};
+  expectError(b.writeGltf(dir), {"extensionsRequired", "unsupported extension(s) EXT_mesh_gpu_instancing",
                                  "KHR_lights_punctual, KHR_materials_emissive_strength"});
 }
 

@@ -327,7 +327,7 @@ TEST(HostileGenerated, BakeTransformsAndSettings) {
   }
 }
 
-// ---- oversized images ------------------------------------------------------------------------------
+// ---- oversized images ---------------------------------------------------------------------------
 
 // The header of an OpenEXR of side x side half RGB, without its pixels: OpenEXR writes the
 // header and an empty line-offset table when the file is closed unwritten. The reader must

@@ -455,6 +455,35 @@ TEST(LightmapSeams, StitchingMakesBothSidesAgree) {
   EXPECT_TRUE(bitEqual(copy, before));
 }
 
+TEST(LightmapSeams, BrightAndDarkSidesStayNonNegative) {
+  // A's lookups along the seam read column 9 (bright, 10) and column 10 (0); B's read
+  // columns 13 and 14 (0). The plain least-squares solution moves all four texels by the
+  // same amount d (10 - 2d = 2d: d = 2.5), taking column 10 to -2.5 (negative texels on real scenes came from this);
+  // the non-negative solve holds it at 0 and moves the others, and the sides still agree.
+  const std::vector<SeamEdge> seams = findSeams(twoQuads(), vec4(1, 1, 0, 0), 24, 12);
+  ASSERT_EQ(seams.size(), 1u);
+  Image image(24, 12, 1);
+  for (int y = 0; y < 12; ++y) image.at(9, y)[0] = 10.0f;
+  const std::vector<uint8_t> mask(24 * 12, 1);
+  StitchSettings plain;
+  plain.nonNegative = false;
+  Image unconstrained = image;
+  (void)stitchSeams(unconstrained, mask, seams, plain);
+  EXPECT_NEAR(unconstrained.at(10, 6)[0], -2.5f, 0.01f);  // what the old solve wrote
+
+  const StitchStats stats = stitchSeams(image, mask, seams);
+  float lowest = 0.0f;
+  for (float v : image.pixels) lowest = std::min(lowest, v);
+  EXPECT_EQ(lowest, 0.0f);
+  EXPECT_EQ(image.at(10, 6)[0], 0.0f);
+  // Column 9 drops and B's columns rise until the lookups agree, x9 = x13 + x14, with the
+  // least change: x13 = x14 = b, (2b - 10)^2 + 2 b^2 minimal at b = 10 / 3, x9 = 20 / 3.
+  EXPECT_NEAR(image.at(9, 6)[0], 20.0f / 3.0f, 0.01f);
+  EXPECT_NEAR(image.at(13, 6)[0], 10.0f / 3.0f, 0.01f);
+  EXPECT_NEAR(image.at(14, 6)[0], 10.0f / 3.0f, 0.01f);
+  EXPECT_LT(stats.rmsAfter, 1e-3 * stats.rmsBefore);
+}
+
 TEST(LightmapSeams, MisalignedSidesGetCloser) {
   // Side B off the texel grid and shorter (6.5 texels against 8): piecewise-linear lookups
   // with different knots cannot agree everywhere, so the least-squares compromise only has

@@ -41,6 +41,51 @@ export const scenes = [
   },
 ];
 
+// Real scenes outside the repository, in the project's shared folder (KILN_SHARED_DIR in
+// tests/CMakeLists.txt, ../shared beside the repository): `path` is the input glTF, `scene`
+// the output's file name (kiln bake names it after the input). They are baked and compared
+// with `--shared DIR` (bake_scenes.mjs, compare_with_kiln_render.mjs), the slow browser
+// test. The breakfast room (262k triangles, base colour textures, metals, a sun and a sky):
+// baked twice, with the default dLDR pages (its sunlit floor and table exceed dLDR's range
+// 2 on a few percent of the texels, which three.js then shows clamped) and with RGBM. The
+// views are the file's cameras CameraMain and, on the dLDR bake, CameraTableTop (the tea
+// set: chrome, metal and ceramic, the marble table top, the tiled floor) as look-from /
+// look-at / yfov, as for the shipped scenes. `views` are more cameras on the same bake.
+export function sharedScenes(sharedDir) {
+  const breakfast = {
+    path: join(sharedDir, 'scenes', 'breakfast_room', 'BreakfastRoom.gltf'),
+    scene: 'BreakfastRoom.gltf',
+    bake: ['--preset', 'preview', '--resolution', '16'],
+    from: [1.1668, 0.9702, 0.6777], at: [0.7596, 0.9859, -0.2355], fov: 45, size: [320, 180],
+    exposure: 0,
+  };
+  return [
+    { ...breakfast, name: 'breakfast_room', ldr: 'dldr',
+      views: [{ name: 'table_top', from: [-0.9927, 0.8911, -1.2292], at: [-0.1105, 0.7814, -1.6871] }] },
+    { ...breakfast, name: 'breakfast_room_rgbm', ldr: 'rgbm' },
+  ];
+}
+
+// The input glTF of a scene entry.
+export function scenePath(scene) {
+  return scene.path || join(scenesDir, scene.scene);
+}
+
+// The scenes a script works on: the shipped ones, or with --shared DIR the real scenes of
+// the shared folder. A missing shared folder skips (exit 77) with a message, under CI too:
+// the shared folder is the project's, not something CI installs.
+export function selectScenes(args) {
+  if (args.shared === undefined) return { list: scenes, shared: false };
+  const list = sharedScenes(resolve(args.shared));
+  const missing = list.filter((s) => !existsSync(s.path)).map((s) => s.path);
+  if (missing.length) {
+    console.log(`SKIPPED: ${[...new Set(missing)].join(', ')} not found (the project's shared ` +
+                'folder, KILN_SHARED_DIR: ../shared beside the repository)');
+    process.exit(SKIP);
+  }
+  return { list, shared: true };
+}
+
 // --name value pairs into an object; `required` names must be present.
 export function parseArgs(argv, required, usage) {
   const out = {};

@@ -10,9 +10,11 @@
 //   - linear radiance (kiln render --linear EXR against the browser's float render target):
 //     the same bound.
 // It prints both comparisons per scene and writes OUT/<scene>/{kiln,three,compare}.png
-// (compare = kiln render | three.js | |difference| x 4, display values).
+// (compare = kiln render | three.js | |difference| x 4, display values). With --shared DIR
+// it compares the bakes of the shared folder's real scenes (bake_scenes.mjs --shared), and
+// skips (exit 77) when they are not there.
 //
-//   node tests/browser/compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR
+//   node tests/browser/compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR [--shared DIR]
 // Exit: 0 pass, 1 fail, 77 skipped (no Chromium, or tools/web's npm packages missing; not
 // under CI=true, where that fails).
 import { spawnSync } from 'node:child_process';
@@ -20,13 +22,14 @@ import { cpSync, existsSync, mkdirSync, readFileSync, rmSync, writeFileSync } fr
 import { join, relative } from 'node:path';
 import {
   ATLAS_UV_SUFFIX, compareImages, fileExists, importThree, requireWebPackage, outputOf, parseArgs, readJson, readPng,
-  rgbImage, scenes, scenesDir, sideBySide, skipOrFail, webDir, writePng, bakeDir,
+  rgbImage, selectScenes, sideBySide, skipOrFail, webDir, writePng, bakeDir,
 } from './common.mjs';
 
 const TOLERANCE = 0.02;  // relative mean difference, both in display and linear values
 
 const args = parseArgs(process.argv.slice(2), ['kiln', 'bakes', 'out'],
-                       'compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR [--chromium PATH]');
+                       'compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR [--shared DIR] [--chromium PATH]');
+const { list: scenes, shared } = selectScenes(args);
 
 function findChromium() {
   const candidates = [args.chromium, process.env.KILN_CHROMIUM, '/usr/bin/chromium',
@@ -101,8 +104,13 @@ const t0 = performance.now();
 const jobs = [];
 for (const s of scenes) {
   jobs.push({ ...s, label: s.name, dir: bakeDir(args.bakes, s), file: outputOf(args.bakes, s) });
+  // More cameras on the same bake (common.mjs: views).
+  for (const v of s.views || [])
+    jobs.push({ ...s, ...v, label: `${s.name} (${v.name})`, name: `${s.name}_${v.name}`,
+                dir: bakeDir(args.bakes, s), file: outputOf(args.bakes, s) });
   const glbDir = join(args.bakes, `${s.name}_glb`);
   const glb = join(glbDir, s.scene.replace(/\.gltf$/, '.glb'));
+  if (shared) continue;  // the .glb, --atlas-uv and bad-input checks are the shipped scenes'
   if (s === scenes[0]) jobs.push({ ...s, label: `${s.name} (.glb)`, name: `${s.name}_glb`, dir: glbDir, file: glb });
   // --atlas-uv: both read the output glTF, whose TEXCOORD_1 holds the atlas UV (identity
   // transforms in MX_lightmap; kiln render sees settings.atlasUv in the manifest).
@@ -252,41 +260,43 @@ try {
   // Bad input: a copy of the Cornell box output whose node 0 has an unknown encoding and
   // node 1 a texture index out of range must load, with one warning per broken node that
   // names the node and the field, and those two nodes without a lightmap.
-  const badDir = join(args.out, 'bad_input');
-  rmSync(badDir, { recursive: true, force: true });
-  cpSync(bakeDir(args.bakes, scenes[0]), badDir, { recursive: true });
-  const badFile = join(badDir, scenes[0].scene);
-  const bad = readJson(badFile);
-  const lightmappedNodes = bad.nodes.map((n, i) => (n.extensions && n.extensions.MX_lightmap ? i : -1)).filter((i) => i >= 0);
-  if (lightmappedNodes.length < 2) {
-    console.error(`FAILED: bad input: ${badFile} has fewer than 2 nodes with MX_lightmap`);
-    failures++;
-  } else {
-    const [a, b] = lightmappedNodes;
-    const extA = bad.nodes[a].extensions.MX_lightmap;
-    extA.extras = { ...(extA.extras || {}), kiln: { ...((extA.extras || {}).kiln || {}), encoding: 'hdr' } };
-    bad.nodes[b].extensions.MX_lightmap.lightMapTexture.index = 99;
-    writeFileSync(badFile, JSON.stringify(bad));
-    const page = await browser.newPage();
-    const messages = [];
-    page.on('console', (m) => messages.push(`${m.type()}: ${m.text()}`));
-    page.on('pageerror', (e) => messages.push(`pageerror: ${e.message}`));
-    await page.goto(`http://127.0.0.1:${port}/viewer.html?static=1&size=64,64&gltf=/out/bad_input/${scenes[0].scene}`);
-    const info = await page.evaluate(() => window.kilnViewer.then((v) => v.info, (e) => 'rejected: ' + e.message));
-    await page.close();
-    const expected = expectedCounts(badFile);  // counts nodes that still have the extension
-    const primitives = (n) => bad.meshes[bad.nodes[n].mesh].primitives.length;
-    const wantMeshes = expected.meshes - primitives(a) - primitives(b);
-    const warnings = messages.filter((m) => m.startsWith('warn'));
-    const nameA = `nodes[${a}] ("${bad.nodes[a].name}").extensions.MX_lightmap.extras.kiln.encoding: "hdr" is not dldr or rgbm`;
-    const nameB = `nodes[${b}] ("${bad.nodes[b].name}").extensions.MX_lightmap.lightMapTexture.index: expected a texture index below`;
-    const ok = typeof info === 'object' && info.lightmappedMeshes === wantMeshes && warnings.length === 2 &&
-               warnings.some((w) => w.includes(nameA)) && warnings.some((w) => w.includes(nameB)) &&
-               messages.length === warnings.length;
-    if (!ok) failures++;
-    console.log(`${ok ? 'ok  ' : 'FAIL'} bad input (node ${a} unknown encoding, node ${b} texture 99): ` +
-                `${typeof info === 'object' ? info.lightmappedMeshes : info} lightmapped meshes ` +
-                `(expected ${wantMeshes}); page messages:\n       ${messages.join('\n       ')}`);
+  if (!shared) {
+    const badDir = join(args.out, 'bad_input');
+    rmSync(badDir, { recursive: true, force: true });
+    cpSync(bakeDir(args.bakes, scenes[0]), badDir, { recursive: true });
+    const badFile = join(badDir, scenes[0].scene);
+    const bad = readJson(badFile);
+    const lightmappedNodes = bad.nodes.map((n, i) => (n.extensions && n.extensions.MX_lightmap ? i : -1)).filter((i) => i >= 0);
+    if (lightmappedNodes.length < 2) {
+      console.error(`FAILED: bad input: ${badFile} has fewer than 2 nodes with MX_lightmap`);
+      failures++;
+    } else {
+      const [a, b] = lightmappedNodes;
+      const extA = bad.nodes[a].extensions.MX_lightmap;
+      extA.extras = { ...(extA.extras || {}), kiln: { ...((extA.extras || {}).kiln || {}), encoding: 'hdr' } };
+      bad.nodes[b].extensions.MX_lightmap.lightMapTexture.index = 99;
+      writeFileSync(badFile, JSON.stringify(bad));
+      const page = await browser.newPage();
+      const messages = [];
+      page.on('console', (m) => messages.push(`${m.type()}: ${m.text()}`));
+      page.on('pageerror', (e) => messages.push(`pageerror: ${e.message}`));
+      await page.goto(`http://127.0.0.1:${port}/viewer.html?static=1&size=64,64&gltf=/out/bad_input/${scenes[0].scene}`);
+      const info = await page.evaluate(() => window.kilnViewer.then((v) => v.info, (e) => 'rejected: ' + e.message));
+      await page.close();
+      const expected = expectedCounts(badFile);  // counts nodes that still have the extension
+      const primitives = (n) => bad.meshes[bad.nodes[n].mesh].primitives.length;
+      const wantMeshes = expected.meshes - primitives(a) - primitives(b);
+      const warnings = messages.filter((m) => m.startsWith('warn'));
+      const nameA = `nodes[${a}] ("${bad.nodes[a].name}").extensions.MX_lightmap.extras.kiln.encoding: "hdr" is not dldr or rgbm`;
+      const nameB = `nodes[${b}] ("${bad.nodes[b].name}").extensions.MX_lightmap.lightMapTexture.index: expected a texture index below`;
+      const ok = typeof info === 'object' && info.lightmappedMeshes === wantMeshes && warnings.length === 2 &&
+                 warnings.some((w) => w.includes(nameA)) && warnings.some((w) => w.includes(nameB)) &&
+                 messages.length === warnings.length;
+      if (!ok) failures++;
+      console.log(`${ok ? 'ok  ' : 'FAIL'} bad input (node ${a} unknown encoding, node ${b} texture 99): ` +
+                  `${typeof info === 'object' ? info.lightmappedMeshes : info} lightmapped meshes ` +
+                  `(expected ${wantMeshes}); page messages:\n       ${messages.join('\n       ')}`);
+    }
   }
 } finally {
   await browser.close();

@@ -19,13 +19,21 @@
 //   - KHR_lights_punctual lights: extras.kiln.baked is true exactly for the lights whose
 //     direct light the bake holds (manifest lights[].bakedDirect).
 //
-//   node tests/browser/validate_outputs.mjs --bakes DIR
+// With --shared DIR (the bakes of bake_scenes.mjs --shared) it validates each real scene's
+// input glTF too: a warning that the input has as well (same code, same JSON pointer: the
+// breakfast room's DDS images, mimeType image/vnd-ms.dds for MSFT_texture_dds) is the
+// input's, passed through as it is; it is printed and counted, and does not fail the test.
+//
+//   node tests/browser/validate_outputs.mjs --bakes DIR [--shared DIR]
 // Exit: 0 pass, 1 fail, 77 skipped (gltf-validator not installed; not under CI=true).
 import { readdirSync, readFileSync, realpathSync, statSync } from 'node:fs';
-import { basename, join, resolve, sep } from 'node:path';
-import { ATLAS_UV_SUFFIX, parseArgs, readJson, requireWebPackage } from './common.mjs';
+import { basename, dirname, join, resolve, sep } from 'node:path';
+import { ATLAS_UV_SUFFIX, parseArgs, readJson, requireWebPackage, selectScenes } from './common.mjs';
 
-const args = parseArgs(process.argv.slice(2), ['bakes'], 'validate_outputs.mjs --bakes DIR');
+const args = parseArgs(process.argv.slice(2), ['bakes'], 'validate_outputs.mjs --bakes DIR [--shared DIR]');
+// Bake folder name -> input glTF, for the real scenes (their input warnings are allowed).
+const inputs = new Map(args.shared === undefined ? []
+                                                 : selectScenes(args).list.map((s) => [s.name, s.path]));
 const validator = requireWebPackage('gltf-validator');
 
 const LINEAR = 9729, CLAMP_TO_EDGE = 33071;
@@ -162,25 +170,10 @@ function describePointers(list) {
   return [...kinds].map(([k, v]) => `${k} x ${v}`).join(', ');
 }
 
-const t0 = performance.now();
-const outputs = [];
-for (const entry of readdirSync(args.bakes).sort()) {
-  const dir = join(args.bakes, entry);
-  if (!statSync(dir).isDirectory()) continue;
-  for (const f of readdirSync(dir).sort())
-    if (f.endsWith('.gltf') || f.endsWith('.glb')) outputs.push({ dir, file: join(dir, f) });
-}
-if (outputs.length === 0) {
-  console.error(`FAILED: no .gltf or .glb in ${args.bakes}/*/: run tests/browser/bake_scenes.mjs first ` +
-                '(the CTest fixture browser_bakes does)');
-  process.exit(1);
-}
-
-let failures = 0;
-const infoTotals = new Map();
-for (const { dir, file } of outputs) {
+// The validator's report on one file, external resources read from `dir` only (the URIs
+// that resolve outside it are returned in `outside`).
+async function validate(file, dir, bytes) {
   const root = realpathSync(dir);
-  const bytes = readFileSync(file);
   const outside = [];
   const report = await validator.validateBytes(new Uint8Array(bytes), {
     uri: file,
@@ -202,6 +195,28 @@ for (const { dir, file } of outputs) {
       resolveData(new Uint8Array(readFileSync(path)));
     }),
   });
+  return { report, outside };
+}
+
+const t0 = performance.now();
+const outputs = [];
+for (const entry of readdirSync(args.bakes).sort()) {
+  const dir = join(args.bakes, entry);
+  if (!statSync(dir).isDirectory()) continue;
+  for (const f of readdirSync(dir).sort())
+    if (f.endsWith('.gltf') || f.endsWith('.glb')) outputs.push({ dir, file: join(dir, f) });
+}
+if (outputs.length === 0) {
+  console.error(`FAILED: no .gltf or .glb in ${args.bakes}/*/: run tests/browser/bake_scenes.mjs first ` +
+                '(the CTest fixture browser_bakes does)');
+  process.exit(1);
+}
+
+let failures = 0;
+const infoTotals = new Map();
+for (const { dir, file } of outputs) {
+  const bytes = readFileSync(file);
+  const { report, outside } = await validate(file, dir, bytes);
   const issues = report.issues;
   const byCode = new Map();
   for (const m of issues.messages) {
@@ -209,13 +224,24 @@ for (const { dir, file } of outputs) {
     if (!byCode.has(key)) byCode.set(key, []);
     byCode.get(key).push(m);
   }
-  const ok = issues.numErrors === 0 && issues.numWarnings === 0 && outside.length === 0;
-  console.log(`${ok ? 'ok  ' : 'FAIL'} ${file}: ${issues.numErrors} errors, ${issues.numWarnings} warnings, ` +
+  // Warnings of a real scene's input, at the same place in the output: the input's.
+  const input = inputs.get(basename(dir));
+  const inputWarnings = new Set();
+  if (input !== undefined) {
+    const { report: inputReport } = await validate(input, dirname(input), readFileSync(input));
+    for (const m of inputReport.issues.messages)
+      if (m.severity === 1) inputWarnings.add(`${m.code} ${m.pointer}`);
+  }
+  const fromInput = (m) => m.severity === 1 && inputWarnings.has(`${m.code} ${m.pointer}`);
+  const ownWarnings = issues.messages.filter((m) => m.severity === 1 && !fromInput(m)).length;
+  const ok = issues.numErrors === 0 && ownWarnings === 0 && outside.length === 0;
+  console.log(`${ok ? 'ok  ' : 'FAIL'} ${file}: ${issues.numErrors} errors, ${issues.numWarnings} warnings` +
+              `${input !== undefined ? ` (${issues.numWarnings - ownWarnings} of them the input's too: ${input})` : ''}, ` +
               `${issues.numInfos} infos, ${issues.numHints} hints (glTF-Validator ${report.validatorVersion})`);
   for (const [key, list] of [...byCode].sort()) {
     console.log(`     ${key} x ${list.length} (${describePointers(list)}): ${list[0].message}`);
     if (key.startsWith('error') || key.startsWith('warning'))
-      for (const m of list) console.log(`       ${m.pointer || ''}: ${m.message}`);
+      for (const m of list) console.log(`       ${m.pointer || ''}: ${m.message}${fromInput(m) ? ' (the input has it too)' : ''}`);
     infoTotals.set(key, (infoTotals.get(key) || 0) + list.length);
   }
   if (outside.length) console.log(`     URIs outside the folder: ${outside.join(', ')}`);

@@ -32,11 +32,9 @@ namespace {
 
 using Json = nlohmann::json;
 
-// The shell's convention for a process stopped by SIGINT (128 + 2).
-constexpr int kExitInterrupted = 130;
-
 struct BakeOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string out;
   std::string preset;
   std::optional<int> samples;
@@ -48,6 +46,8 @@ struct BakeOptions {
   int threads = 0;
   bool noDenoise = false;
   bool ao = false;
+  std::optional<float> aoAmount;    // --ao-amount: bakes AO and applies it to the light map
+  std::optional<float> aoDistance;  // --ao-distance: AO ray length, world units
   std::string ldr;
   std::string lockAtlas;
   std::string lightingMode;
@@ -56,6 +56,7 @@ struct BakeOptions {
   bool atlasUv = false;
   bool glb = false;
   bool quiet = false;
+  SkyOptions sky;
 };
 
 std::string humanCount(double n) {
@@ -69,30 +70,6 @@ std::string humanCount(double n) {
   else
     std::snprintf(buf, sizeof buf, "%.0f", n);
   return buf;
-}
-
-// --shadow-color "R,G,B": three finite numbers >= 0 (lightmap units, E / pi), separated by
-// commas; spaces around them are allowed. Returns nothing for anything else.
-std::optional<vec3> parseShadowColor(const std::string& text) {
-  vec3 colour(0.0f);
-  size_t start = 0;
-  for (int c = 0; c < 3; ++c) {
-    const size_t comma = text.find(',', start);
-    if ((c < 2) != (comma != std::string::npos)) return std::nullopt;  // not exactly 3 parts
-    std::string part =
-        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    start = comma + 1;
-    const size_t first = part.find_first_not_of(" \t"), last = part.find_last_not_of(" \t");
-    if (first == std::string::npos) return std::nullopt;
-    part = part.substr(first, last - first + 1);
-    char* end = nullptr;
-    const double v = std::strtod(part.c_str(), &end);
-    if (end != part.c_str() + part.size() || !std::isfinite(v) || v < 0.0 ||
-        v > double(std::numeric_limits<float>::max()))
-      return std::nullopt;
-    colour[c] = float(v) + 0.0f;  // "-0" reads as +0
-  }
-  return colour;
 }
 
 // The scene's extras.kiln settings that the lightmap bake uses. Returns an exit code.
@@ -159,8 +136,11 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
   Scene unwrapped = scene;
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
+  unwrap.showProgress = !o.quiet;
+  unwrap.cancel = &cancelFlag();
   Result<std::vector<std::optional<UnwrapResult>>> uvs =
       generateMissingLightmapUvs(unwrapped, settings.resolution, unwrap);
+  if (cancelFlag().load()) return reportInterrupted(o.out);
   if (!uvs) {
     printError(scene.path + ": " + uvs.error());
     return kExitBadInput;
@@ -178,7 +158,7 @@ int runBake(const BakeOptions& o) {
   const auto start = std::chrono::steady_clock::now();
   std::optional<vec3> shadowColor;
   if (o.shadowColor) {
-    shadowColor = parseShadowColor(*o.shadowColor);
+    shadowColor = parseNonNegativeRgb(*o.shadowColor);
     if (!shadowColor) {
       printError("--shadow-color '" + *o.shadowColor +
                  "': expected three finite numbers >= 0 separated by commas, R,G,B in "
@@ -186,8 +166,12 @@ int runBake(const BakeOptions& o) {
       return kExitBadUsage;
     }
   }
+  // Before any work: a bad --out or sky fails now, not after the bake.
+  if (int code = checkOutputDirectory("--out", o.out)) return code;
+  std::optional<Sky> sky;
+  if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   LightmapBakeSettings settings;
   std::string preset = o.preset;
@@ -212,6 +196,11 @@ int runBake(const BakeOptions& o) {
   settings.threads = o.threads;
   if (o.noDenoise) settings.denoise = false;
   if (o.ao) settings.ambientOcclusion = true;
+  if (o.aoAmount) {
+    settings.ambientOcclusion = true;
+    settings.aoAmount = *o.aoAmount;
+  }
+  if (o.aoDistance) settings.aoMaxDistance = *o.aoDistance;
 
   LightmapOutputSettings output;
   output.outDir = o.out;
@@ -240,12 +229,8 @@ int runBake(const BakeOptions& o) {
               << " texels/unit, " << settings.samplesPerTexel << " samples/texel, "
               << settings.bounces << " bounces" << (preset.empty() ? "" : ", preset " + preset)
               << "\n";
-  installInterruptHandler();
   Result<LightmapBakeResult> baked = bakeLightmaps(scene, settings, !o.quiet, &cancelFlag());
-  if (cancelFlag().load()) {
-    printError("interrupted; " + o.out + " left untouched");
-    return kExitInterrupted;
-  }
+  if (cancelFlag().load()) return reportInterrupted(o.out);
   if (!baked) {
     printError(scene.path + ": " + baked.error());
     return kExitBadInput;
@@ -284,6 +269,8 @@ void registerBakeCommand(CLI::App& app) {
   CLI::App* b = app.add_subcommand(
       "bake", "Bake lightmaps: OpenEXR pages, manifest.json and a glTF that references them");
   b->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   b->add_option("--out,-o", o->out, "Output directory (created; files replaced atomically)")
       ->required();
   b->add_option("--preset", o->preset,
@@ -306,6 +293,13 @@ void registerBakeCommand(CLI::App& app) {
       ->capture_default_str();
   b->add_flag("--no-denoise", o->noDenoise, "Skip the edge-aware denoiser");
   b->add_flag("--ao", o->ao, "Also bake ambient occlusion (lightmap-<i>_ao.exr)");
+  b->add_option("--ao-amount", o->aoAmount,
+                "Bake AO and apply it to the light map: light x (1 - A (1 - ao)), A in [0, 1] "
+                "(default: the scene's extras.kiln.aoAmount, else 0 = not applied)")
+      ->check(CLI::Range(0.0f, 1.0f));
+  b->add_option("--ao-distance", o->aoDistance,
+                "AO ray length in world units, > 0 (default: extras.kiln.aoMaxDistance, else 1)")
+      ->check(CLI::Range(1e-6f, 1e9f));
   b->add_option("--ldr", o->ldr,
                 "8-bit PNG pages, the output glTF's lightmap textures: dldr (default) or rgbm "
                 "(decode: docs)")
@@ -323,6 +317,7 @@ void registerBakeCommand(CLI::App& app) {
                 "manifest (default 0.42,0.478,0.627)");
   b->add_flag("--directional", o->directional,
               "Also bake the dominant light direction (lightmap-<i>_direction.exr)");
+  addSkyOptions(b, o->sky);
   b->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
   b->callback(commandCallback([o]() { return runBake(*o); }));
 }

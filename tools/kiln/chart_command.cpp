@@ -33,11 +33,14 @@ int runChart(const ChartCommandOptions& o) {
   options.command = "kiln chart --out " + o.out + (o.quick ? " --quick" : "");
   for (const std::string& n : o.only) options.command += " --only " + n;
   if (o.seed) options.command += " --seed " + std::to_string(o.seed);
+  // Before any work: a bad --out fails now, not after minutes of measuring.
+  if (int code = checkOutputDirectory("--out", o.out)) return code;
   installInterruptHandler();
   options.cancel = &cancelFlag();
   Result<chart::ChartRunReport> report = chart::runCharts(options, o.out, o.only);
+  if (cancelFlag().load()) return reportInterrupted("charts not finished");
   if (!report) {
-    printError(cancelFlag().load() ? std::string("interrupted") : report.error());
+    printError(report.error());
     return kExitBadInput;
   }
   for (const std::string& s : report->skipped) printWarning(s);

@@ -1,10 +1,20 @@
 // cli_common.cpp: the shared pieces of the kiln CLI (see cli_common.h).
 #include "tools/kiln/cli_common.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <charconv>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <iostream>
+#include <limits>
+#include <memory>
 
 #include "kiln/probe_visibility.h"
+#include "src/progress.h"
 
 namespace kiln::cli {
 
@@ -29,6 +39,162 @@ int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene
   *scene = std::move(loaded).value();
   if (printWarnings)
     for (const std::string& w : scene->warnings) printWarning(w);
+  return kExitOk;
+}
+
+int loadSceneForBake(const std::string& path, int gltfScene, bool quiet,
+                     const std::optional<Sky>& sky, Scene* scene) {
+  installInterruptHandler();
+  LoadOptions options;
+  options.scene = gltfScene;
+  options.loadSkyMap = !sky;  // replaced anyway: do not read the scene's map
+  options.cancel = &cancelFlag();
+  std::unique_ptr<Progress> progress;  // made at the first texture, when the total is known
+  if (!quiet)
+    options.textureProgress = [&progress](size_t done, size_t total) {
+      if (!progress) progress = std::make_unique<Progress>("texture decoding", total, "textures");
+      progress->advance(done - progress->done());
+      if (done >= total) progress->finish();
+    };
+  Result<Scene> loaded = loadScene(path, options);
+  if (progress) progress->finish();
+  if (cancelFlag().load()) return reportInterrupted("outputs");
+  if (!loaded) {
+    printError(loaded.error());
+    return kExitBadInput;
+  }
+  *scene = std::move(loaded).value();
+  if (sky) scene->sky = *sky;
+  for (const std::string& w : scene->warnings) printWarning(w);
+  return kExitOk;
+}
+
+int reportInterrupted(const std::string& what) {
+  printError("interrupted; " + what + " left untouched");
+  return kExitInterrupted;
+}
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Whether a new file can be created in the existing directory `dir`: creates and removes a
+// uniquely named probe file (permission bits alone say nothing for root, and nothing about
+// read-only file systems). Returns an empty string or the reason.
+std::string probeWritable(const fs::path& dir) {
+  std::string probe = (dir / ".kiln-write-check-XXXXXX").string();
+  int fd = ::mkstemp(probe.data());
+  if (fd < 0) return std::string("cannot create files in ") + dir.string() + ": " + std::strerror(errno);
+  ::close(fd);
+  ::unlink(probe.c_str());
+  return "";
+}
+
+}  // namespace
+
+int checkOutputDirectory(const std::string& option, const std::string& path) {
+  auto fail = [&](const std::string& why) {
+    printError(option + " " + path + ": " + why);
+    return kExitBadInput;
+  };
+  if (path.empty()) return fail("empty path");
+  std::error_code ec;
+  fs::path p = fs::absolute(fs::path(path), ec);
+  if (ec) return fail(ec.message());
+  // The nearest existing ancestor (or the path itself) must be a directory: mkdir fails
+  // under a regular file.
+  fs::path existing = p;
+  while (!fs::exists(existing, ec)) {
+    if (ec && ec != std::errc::no_such_file_or_directory) return fail(ec.message());
+    if (!existing.has_parent_path() || existing.parent_path() == existing) break;
+    existing = existing.parent_path();
+  }
+  if (!fs::is_directory(existing, ec))
+    return fail(existing == p ? "exists and is not a directory"
+                              : existing.string() + " is not a directory, so the directory "
+                                                    "cannot be created");
+  if (std::string why = probeWritable(existing); !why.empty()) return fail(why);
+  return kExitOk;
+}
+
+int checkOutputFile(const std::string& option, const std::string& path) {
+  auto fail = [&](const std::string& why) {
+    printError(option + " " + path + ": " + why);
+    return kExitBadInput;
+  };
+  if (path.empty()) return fail("empty path");
+  std::error_code ec;
+  fs::path p = fs::absolute(fs::path(path), ec);
+  if (ec) return fail(ec.message());
+  if (fs::is_directory(p, ec)) return fail("is a directory");
+  const fs::path dir = p.parent_path();
+  if (!fs::exists(dir, ec)) return fail("directory " + dir.string() + " does not exist");
+  if (!fs::is_directory(dir, ec)) return fail(dir.string() + " is not a directory");
+  if (std::string why = probeWritable(dir); !why.empty()) return fail(why);
+  return kExitOk;
+}
+
+std::optional<vec3> parseNonNegativeRgb(const std::string& text) {
+  vec3 colour(0.0f);
+  size_t start = 0;
+  for (int c = 0; c < 3; ++c) {
+    const size_t comma = text.find(',', start);
+    if ((c < 2) != (comma != std::string::npos)) return std::nullopt;  // not exactly 3 parts
+    std::string part =
+        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    start = comma + 1;
+    const size_t first = part.find_first_not_of(" \t"), last = part.find_last_not_of(" \t");
+    if (first == std::string::npos) return std::nullopt;
+    part = part.substr(first, last - first + 1);
+    char* end = nullptr;
+    const double v = std::strtod(part.c_str(), &end);
+    if (end != part.c_str() + part.size() || !std::isfinite(v) || v < 0.0 ||
+        v > double(std::numeric_limits<float>::max()))
+      return std::nullopt;
+    colour[c] = float(v) + 0.0f;  // "-0" reads as +0
+  }
+  return colour;
+}
+
+void addSkyOptions(CLI::App* command, SkyOptions& options) {
+  CLI::Option* color = command->add_option(
+      "--sky", options.color,
+      "Constant sky radiance R,G,B (finite, >= 0), replacing the scene's extras.kiln.sky");
+  CLI::Option* map = command->add_option(
+      "--sky-map", options.map,
+      "Equirectangular sky map (.hdr or .exr), replacing the scene's extras.kiln.sky");
+  map->excludes(color);
+  command->add_option("--sky-intensity", options.intensity,
+                      "Scale of --sky or --sky-map (default 1)");
+}
+
+int resolveSky(const SkyOptions& o, std::optional<Sky>* sky) {
+  if (o.intensity && (!std::isfinite(*o.intensity) || *o.intensity < 0.0f)) {
+    printError("--sky-intensity " + std::to_string(*o.intensity) + ": must be finite and >= 0");
+    return kExitBadUsage;
+  }
+  if (o.intensity && !o.color && o.map.empty()) {
+    printError("--sky-intensity needs --sky or --sky-map");
+    return kExitBadUsage;
+  }
+  const float intensity = o.intensity.value_or(1.0f);
+  if (o.color) {
+    std::optional<vec3> c = parseNonNegativeRgb(*o.color);
+    if (!c) {
+      printError("--sky '" + *o.color +
+                 "': expected three finite numbers >= 0 separated by commas, R,G,B radiance "
+                 "(e.g. 1,1,1)");
+      return kExitBadUsage;
+    }
+    *sky = Sky::constant(*c * intensity);
+  } else if (!o.map.empty()) {
+    Result<Sky> loaded = Sky::fromFile(o.map, intensity);
+    if (!loaded) {
+      printError("--sky-map " + o.map + ": " + loaded.error());
+      return kExitBadInput;
+    }
+    *sky = std::move(loaded).value();
+  }
   return kExitOk;
 }
 

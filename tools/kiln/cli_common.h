@@ -8,10 +8,12 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <optional>
 #include <string>
 
 #include "src/gltf_loader.h"
 #include "src/scene.h"
+#include "src/sky.h"
 
 namespace kiln::cli {
 
@@ -19,6 +21,7 @@ namespace kiln::cli {
 inline constexpr int kExitOk = 0;
 inline constexpr int kExitBadInput = 1;  // a file could not be loaded, read or written
 inline constexpr int kExitBadUsage = 2;  // wrong options or arguments
+inline constexpr int kExitInterrupted = 130;  // Ctrl-C / SIGTERM: 128 + SIGINT, as the shell
 
 void printError(const std::string& message);
 void printWarning(const std::string& message);
@@ -32,6 +35,40 @@ std::function<void()> commandCallback(std::function<int()> body);
 // warnings themselves) and returns kExitOk.
 int loadSceneOrReport(const std::string& path, const LoadOptions& options, Scene* scene,
                       bool printWarnings = true);
+
+// Same, for commands that run long: installs the Ctrl-C handler first, shows texture decoding
+// progress on stderr unless `quiet`, stops on Ctrl-C (returns kExitInterrupted, with a
+// message) and replaces the scene's sky by `sky` when given (the scene's own sky map is then
+// not loaded). `gltfScene` is the glTF scene to load (-1: the file's default; --scene).
+int loadSceneForBake(const std::string& path, int gltfScene, bool quiet,
+                     const std::optional<Sky>& sky, Scene* scene);
+
+// Prints "interrupted; <what> left untouched" and returns kExitInterrupted.
+int reportInterrupted(const std::string& what);
+
+// Output paths checked before any work, so that a bad --out fails at once rather than after
+// a long bake. A directory: `path` must be a directory, or not exist with its nearest
+// existing ancestor a directory; that directory must accept a new file (a probe file is
+// created and removed). A file: `path` must not be a directory and its directory must exist
+// and accept a new file. Prints "<option> <path>: ..." and returns kExitBadInput on failure.
+int checkOutputDirectory(const std::string& option, const std::string& path);
+int checkOutputFile(const std::string& option, const std::string& path);
+
+// "R,G,B": three finite numbers >= 0 separated by commas (spaces around them allowed).
+std::optional<vec3> parseNonNegativeRgb(const std::string& text);
+
+// --sky R,G,B | --sky-map FILE [--sky-intensity S]: the environment, overriding the scene's
+// extras.kiln.sky.
+struct SkyOptions {
+  std::optional<std::string> color;
+  std::string map;
+  std::optional<float> intensity;
+};
+void addSkyOptions(CLI::App* command, SkyOptions& options);
+// The sky the options ask for (nullopt: none given, keep the scene's). Returns an exit code:
+// kExitBadUsage for a bad value (naming the option), kExitBadInput for a map that cannot be
+// read (naming the file).
+int resolveSky(const SkyOptions& options, std::optional<Sky>* sky);
 
 // Subcommand registration.
 // Checks a --visibility-resolution value: 0 (whose meaning `zero` names in the message) or an

@@ -217,16 +217,19 @@ void printText(const Scene& scene, std::ostream& out) {
 void registerInfoCommand(CLI::App& app) {
   struct Options {
     std::string scene;
+    int gltfScene = -1;  // --scene
     bool json = false;
   };
   auto options = std::make_shared<Options>();
   CLI::App* sub = app.add_subcommand("info", "Summarize what kiln reads from a glTF scene");
   sub->add_option("scene", options->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  sub->add_option("--scene", options->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   sub->add_flag("--json", options->json, "Print the summary as a JSON object");
   sub->callback(commandCallback([options]() {
     Scene scene;
     // Warnings are part of the report itself, so they are not also printed to stderr.
-    if (int code = loadSceneOrReport(options->scene, LoadOptions{}, &scene, false)) return code;
+    if (int code = loadSceneOrReport(options->scene, LoadOptions{.scene = options->gltfScene}, &scene, false)) return code;
     if (options->json)
       std::cout << infoJson(scene).dump(2) << "\n";
     else

@@ -53,6 +53,7 @@ Json shJson(const ShL2Rgb& sh) {
 
 struct BakeOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string positions;
   std::string out;
   int rays = 16384;
@@ -66,11 +67,16 @@ struct BakeOptions {
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = none
   float visibilityMaxDistance = 0.0f;                       // 0 = per probe (auto)
   bool quiet = false;
+  SkyOptions sky;
 };
 
 int runBake(const BakeOptions& o) {
+  // Before any work: a bad --out or sky fails now, not after the bake.
+  if (int code = checkOutputFile("--out", o.out)) return code;
+  std::optional<Sky> sky;
+  if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   std::vector<vec3> positions;
   if (!o.positions.empty()) {
@@ -98,6 +104,7 @@ int runBake(const BakeOptions& o) {
     printError(scene.path + ": " + tracer.error());
     return kExitBadInput;
   }
+  if (cancelFlag().load()) return reportInterrupted(o.out);
 
   ProbeBakeSettings settings;
   settings.rays = uint32_t(o.rays);
@@ -122,18 +129,14 @@ int runBake(const BakeOptions& o) {
               << " from the positions file, " << positions.size() - fromFile
               << " from the scene's probe groups), " << o.rays << " rays each\n";
   }
-  installInterruptHandler();
   Progress progress("probes", positions.size(), "probes", !o.quiet);
   ProbeBakeReport report;
   const auto start = std::chrono::steady_clock::now();
   Result<ProbeSet> set =
       bakeProbes(scene, **tracer, positions, settings, &progress, &cancelFlag(), &report);
+  if (cancelFlag().load()) return reportInterrupted(o.out);
   if (!set) {
-    if (cancelFlag().load()) {
-      printError("interrupted; " + o.out + " left untouched");
-    } else {
-      printError(scene.path + ": " + set.error());
-    }
+    printError(scene.path + ": " + set.error());
     return kExitBadInput;
   }
   for (const std::string& w : report.warnings) printWarning(w);
@@ -422,6 +425,8 @@ void registerProbesCommand(CLI::App& app) {
   CLI::App* b = probes->add_subcommand(
       "bake", "Bake L2 radiance SH light probes at given positions into a .kprobe file");
   b->add_option("scene", bake->scene, "glTF 2.0 file (.gltf or .glb)")->required();
+  b->add_option("--scene", bake->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   b->add_option("--positions", bake->positions,
                 "JSON file {\"positions\": [[x, y, z], ...]} (world space, metres); the scene's "
                 "probe groups (extras.kiln.probes) are added unless --no-scene-probes");
@@ -469,6 +474,7 @@ void registerProbesCommand(CLI::App& app) {
           },
           "METRES >= 0"))
       ->capture_default_str();
+  addSkyOptions(b, bake->sky);
   b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
   b->callback(commandCallback([bake]() { return runBake(*bake); }));
 

@@ -99,6 +99,8 @@ int runLppv(const LppvOptions& o) {
     return kExitBadUsage;
   }
 
+  // Before any work: PREFIX's directory must take the files (PREFIX.klppv is the first).
+  if (int code = checkOutputFile("--out", o.out + ".klppv")) return code;
   Result<ProbeSet> set = loadProbeFile(o.file);
   if (!set) {
     printError(set.error());
@@ -119,7 +121,7 @@ int runLppv(const LppvOptions& o) {
     // Bake the grid's samples directly as probes (one per sample, same order) instead of
     // interpolating the probe field: sharper where the probes are sparse, and costs a bake.
     Scene scene;
-    if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+    if (int code = loadSceneForBake(o.scene, -1, o.quiet, std::nullopt, &scene)) return code;
     Result<std::unique_ptr<Tracer>> tracer = Tracer::create(scene);
     if (!tracer) {
       printError(scene.path + ": " + tracer.error());
@@ -129,14 +131,13 @@ int runLppv(const LppvOptions& o) {
     bake.rays = uint32_t(o.rays);
     bake.threads = o.threads;
     const std::vector<glm::vec3> positions = lppvSamplePositions(volume);
-    installInterruptHandler();
     Progress progress("lppv", positions.size(), "samples", !o.quiet);
     ProbeBakeReport report;
     Result<ProbeSet> baked =
         bakeProbes(scene, **tracer, positions, bake, &progress, &cancelFlag(), &report);
+    if (cancelFlag().load()) return reportInterrupted(o.out + ".*");
     if (!baked) {
-      printError(cancelFlag().load() ? "interrupted; " + o.out + ".* left untouched"
-                                     : scene.path + ": " + baked.error());
+      printError(scene.path + ": " + baked.error());
       return kExitBadInput;
     }
     for (const std::string& w : report.warnings) printWarning(w);

@@ -69,6 +69,7 @@ struct CommonOptions {
   uint64_t seed = 0;
   int threads = 0;
   bool quiet = false;
+  SkyOptions sky;
 };
 
 // Fills the placement settings shared by both subcommands; returns an exit code.
@@ -127,6 +128,7 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
   c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
   c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber);
+  addSkyOptions(c, o->sky);
   c->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
 }
 
@@ -135,8 +137,12 @@ struct LoadedScene {
   std::unique_ptr<Tracer> tracer;
 };
 
-int loadTraced(const std::string& path, LoadedScene* out) {
-  if (int code = loadSceneOrReport(path, LoadOptions{}, &out->scene)) return code;
+// Loads the scene (with the --sky override; Ctrl-C installed) and builds its tracer.
+int loadTraced(const CommonOptions& o, LoadedScene* out) {
+  std::optional<Sky> sky;
+  if (int code = resolveSky(o.sky, &sky)) return code;
+  if (int code = loadSceneForBake(o.scene, -1, o.quiet, sky, &out->scene)) return code;
+  const std::string& path = o.scene;
   Result<std::unique_ptr<Tracer>> tracer = Tracer::create(out->scene);
   if (!tracer) {
     printError(path + ": " + tracer.error());
@@ -162,13 +168,14 @@ int runPlace(const PlaceOptions& o) {
   settings.budget = uint32_t(o.budget);
   settings.targetError = o.targetError;
   settings.prune = !o.noPrune;
+  // Before any work: a bad --out fails now, not after the placement.
+  if (int code = checkOutputFile("--out", o.out)) return code;
   LoadedScene ls;
-  if (int code = loadTraced(o.common.scene, &ls)) return code;
-  installInterruptHandler();
+  if (int code = loadTraced(o.common, &ls)) return code;
   Result<ProbePlacement> placed = placeProbes(ls.scene, *ls.tracer, settings, &cancelFlag());
+  if (cancelFlag().load()) return reportInterrupted(o.out);
   if (!placed) {
-    printError(cancelFlag().load() ? "interrupted; " + o.out + " left untouched"
-                                   : o.common.scene + ": " + placed.error());
+    printError(o.common.scene + ": " + placed.error());
     return kExitBadInput;
   }
   Json positions = Json::array(), probes = Json::array();
@@ -266,9 +273,11 @@ int runCompare(const CompareOptions& o) {
     const int n = o.count * num / den;
     if (n >= 4) settings.snapshotCounts.push_back(uint32_t(n));
   }
+  for (const auto& [option, file] : {std::pair{"--csv", o.csv}, {"--points-csv", o.pointsCsv}})
+    if (!file.empty())
+      if (int code = checkOutputFile(option, file)) return code;
   LoadedScene ls;
-  if (int code = loadTraced(o.common.scene, &ls)) return code;
-  installInterruptHandler();
+  if (int code = loadTraced(o.common, &ls)) return code;
   const Scene& scene = ls.scene;
   const Tracer& tracer = *ls.tracer;
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
@@ -290,10 +299,7 @@ int runCompare(const CompareOptions& o) {
     truth = bakePointSh(scene, tracer, points, bake, &progress, &cancelFlag());
     progress.finish();
   }
-  if (truth.empty()) {
-    printError("interrupted");
-    return kExitBadInput;
-  }
+  if (truth.empty() || cancelFlag().load()) return reportInterrupted("outputs");
   double meanRms = 0.0;
   for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
   const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
@@ -308,10 +314,7 @@ int runCompare(const CompareOptions& o) {
     rebaked = bakePointSh(scene, tracer, points, again, &progress, &cancelFlag());
     progress.finish();
   }
-  if (rebaked.empty()) {
-    printError("interrupted");
-    return kExitBadInput;
-  }
+  if (rebaked.empty() || cancelFlag().load()) return reportInterrupted("outputs");
   std::vector<float> noiseErrors(points.size());
   for (size_t i = 0; i < points.size(); ++i)
     noiseErrors[i] = relativeIrradianceError(truth[i], rebaked[i], floor);
@@ -380,6 +383,7 @@ int runCompare(const CompareOptions& o) {
     return uniformGridPositions(scene, tracer, volumes, uint32_t(o.count), settings.validity,
                                 o.common.threads);
   });
+  if (cancelFlag().load()) return reportInterrupted("outputs");
   if (!gridRow) return kExitBadInput;
   rows.push_back(*gridRow);
 
@@ -392,20 +396,24 @@ int runCompare(const CompareOptions& o) {
   std::optional<Row> octreeRow = baseline("octree corners", [&] {
     return octreeCornerPositions(scene, tracer, octree, uint32_t(o.count));
   });
+  if (cancelFlag().load()) return reportInterrupted("outputs");
   if (!octreeRow) return kExitBadInput;
   rows.push_back(*octreeRow);
 
   Result<ProbePlacement> placed = placeProbes(scene, tracer, settings, &cancelFlag());
+  if (cancelFlag().load()) return reportInterrupted("outputs");
   if (!placed) {
     printError(o.common.scene + ": " + placed.error());
     return kExitBadInput;
   }
   for (size_t s = 0; s < placed->snapshots.size(); ++s) {
     std::optional<Row> r = evaluate("automatic (grown)", placed->snapshots[s], 0.0);
+    if (cancelFlag().load()) return reportInterrupted("outputs");
     if (!r) return kExitBadInput;
     rows.push_back(*r);
   }
   std::optional<Row> autoRow = evaluate("automatic", placed->positions(), placed->seconds);
+  if (cancelFlag().load()) return reportInterrupted("outputs");
   if (!autoRow) return kExitBadInput;
   rows.push_back(*autoRow);
 

@@ -25,10 +25,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr int kExitInterrupted = 130;  // 128 + SIGINT, as the shell reports it
-
 struct RenderOptions {
   std::string scene;
+  int gltfScene = -1;  // --scene
   std::string lightmaps;
   std::string probes;
   std::string probeBlend = "visibility";
@@ -47,6 +46,7 @@ struct RenderOptions {
   std::vector<std::string> compare;
   float diffScale = 4.0f;
   bool quiet = false;
+  SkyOptions sky;
 };
 
 // "X,Y,Z" -> three finite numbers.
@@ -168,8 +168,14 @@ int runRender(const RenderOptions& o) {
     return kExitBadUsage;
   }
 
+  // Before any work: a bad --out or sky fails now, not after the render.
+  if (int code = checkOutputFile("--out", o.out)) return code;
+  if (!o.linear.empty())
+    if (int code = checkOutputFile("--linear", o.linear)) return code;
+  std::optional<Sky> sky;
+  if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
-  if (int code = loadSceneOrReport(o.scene, LoadOptions{}, &scene)) return code;
+  if (int code = loadSceneForBake(o.scene, o.gltfScene, o.quiet, sky, &scene)) return code;
 
   std::optional<LightmapSet> lightmaps;
   if (!o.lightmaps.empty()) {
@@ -237,7 +243,6 @@ int runRender(const RenderOptions& o) {
   settings.seed = o.seed;
   settings.threads = o.threads;
   settings.showProgress = !o.quiet;
-  installInterruptHandler();
   settings.cancel = &cancelFlag();
   if (!o.quiet)
     std::cerr << "kiln: rendering " << scene.path << " (" << o.mode << ", " << width << " x "
@@ -282,6 +287,8 @@ void registerRenderCommand(CLI::App& app) {
       "Render a PNG of the scene shaded from its lightmaps and probes (preview), or path traced "
       "(reference); or compare two images (--compare A B)");
   r->add_option("scene", o->scene, "glTF 2.0 file (.gltf or .glb)");
+  r->add_option("--scene", o->gltfScene, "glTF scene to load, numbered from 0 (default: the file's 'scene', else 0)")
+      ->check(CLI::NonNegativeNumber);
   r->add_option("--lightmaps", o->lightmaps,
                 "Directory written by kiln bake (manifest.json + EXR pages)");
   r->add_option("--probes", o->probes, ".kprobe file (kiln probes bake) for dynamic objects");
@@ -324,6 +331,7 @@ void registerRenderCommand(CLI::App& app) {
   r->add_option("--diff-scale", o->diffScale, "--compare: difference image = |A - B| x this")
       ->check(CLI::Range(1e-3f, 1e6f))
       ->capture_default_str();
+  addSkyOptions(r, o->sky);
   r->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
   r->callback(commandCallback([o]() { return o->compare.empty() ? runRender(*o) : runCompare(*o); }));
 }

@@ -444,7 +444,9 @@ class Renderer {
                lm->lights.size() != scene_.lights.size()))
       return Error{"the lightmaps do not belong to " + scene_.path};
 
-    Result<std::unique_ptr<Tracer>> tracer = Tracer::create(scene_);
+    // Over every object: the camera sees dynamic objects (lit by the probes) and they cast
+    // the run-time lights' shadows; bakes leave them out (TracerGeometry::BakedGI).
+    Result<std::unique_ptr<Tracer>> tracer = Tracer::create(scene_, TracerGeometry::All);
     if (!tracer) return Error{tracer.error()};
     tracer_ = std::move(tracer).value();
 
@@ -491,7 +493,10 @@ class Renderer {
     const LightmapSet& lm = *in_.lightmaps;
     if (!in_.spheres.empty() && !in_.probes)
       return Error{"dynamic spheres need probes (--probes FILE.kprobe) in the preview"};
-    integrator_ = std::make_unique<Integrator>(scene_, *tracer_);
+    // Only for the run-time lights' shadows, which bakedShadows (a bake setting) leaves alone.
+    IntegratorSettings runtime;
+    runtime.honourBakedShadows = false;
+    integrator_ = std::make_unique<Integrator>(scene_, *tracer_, runtime);
     // Probe light per object without a lightmap, and per sphere.
     objectProbes_.resize(scene_.objects.size());
     for (size_t o = 0; o < scene_.objects.size(); ++o) {
@@ -559,7 +564,8 @@ class Renderer {
                                                      uint32_t(augmented_->materials.size() - 1)));
     }
     augmented_->updateBounds();
-    Result<std::unique_ptr<Tracer>> tracer = Tracer::create(*augmented_);
+    // Every object, the dynamic ones too: the reference is the path-traced truth of the view.
+    Result<std::unique_ptr<Tracer>> tracer = Tracer::create(*augmented_, TracerGeometry::All);
     if (!tracer) return Error{tracer.error()};
     augmentedTracer_ = std::move(tracer).value();
     IntegratorSettings is;
