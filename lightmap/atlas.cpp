@@ -97,6 +97,17 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object) {
   return {lo, hi};
 }
 
+Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what) {
+  uint64_t texels = 0;
+  for (const AtlasPage& page : pages) texels += uint64_t(page.width) * uint64_t(page.height);
+  if (texels > kMaxLightmapTexels)
+    return Error{what + ": " + std::to_string(pages.size()) + " page(s) of " +
+                 std::to_string(texels) + " texels in all, more than the budget of " +
+                 std::to_string(kMaxLightmapTexels) +
+                 " (docs/limits.md): lower the resolution or maxSize"};
+  return Status::success();
+}
+
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings) {
   const int p = settings.padding;
   if (p < 0) return Error{"lightmap padding must be >= 0 (got " + std::to_string(p) + ")"};
@@ -124,6 +135,8 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
         return Error{"locked atlas: " + describe(scene.objects[i]) + ": lightmapIndex " +
                      std::to_string(page) + " out of range"};
     }
+    if (Status budget = checkTexelBudget(locked.pages, "locked atlas"); !budget)
+      return Error{budget.error()};
     return locked;
   }
 
@@ -161,6 +174,18 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     layout.objects[i].texelSize = size;
     layout.objects[i].texelsPerUnit = float(k * std::sqrt(a.uv / a.world));
     lightmapped.push_back(i);
+  }
+
+  // The texel budget, before packing and before anything the size of a page is allocated:
+  // the objects' padded rectangles are a lower bound of the pages' area.
+  {
+    uint64_t texels = 0;
+    for (uint32_t i : lightmapped) texels += uint64_t(sizes[i].x + p) * uint64_t(sizes[i].y + p);
+    if (texels > kMaxLightmapTexels)
+      return Error{"lightmap resolution " + std::to_string(settings.resolution) +
+                   " texels per unit needs at least " + std::to_string(texels) +
+                   " texels, more than the budget of " + std::to_string(kMaxLightmapTexels) +
+                   " (docs/limits.md): lower the resolution or scaleInLightmap"};
   }
 
   // Fill maxSize pages in packing order; then shrink each page.
@@ -205,6 +230,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     progress.advance(members.size());
   }
   progress.finish();
+  // Pages are powers of two, so they may exceed the objects' area (up to about 4x).
+  if (Status budget = checkTexelBudget(layout.pages, "lightmap pages"); !budget)
+    return Error{budget.error()};
   return layout;
 }
 

@@ -46,6 +46,14 @@ struct AtlasLayout {
   std::vector<std::string> warnings;  // e.g. objects scaled down to fit maxSize
 };
 
+// The most texels all of a bake's pages may hold together (2^27: eight 4096^2 pages). Every
+// texel costs the bake tens of bytes, so packAtlas refuses layouts above it (before anything
+// the size of a page is allocated) instead of running out of memory (docs/limits.md).
+inline constexpr uint64_t kMaxLightmapTexels = uint64_t(1) << 27;
+
+// Success when `pages` hold at most kMaxLightmapTexels; else an error starting with `what`.
+Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what);
+
 struct AtlasSettings {
   float resolution = 10.0f;  // texels per world unit (before scaleInLightmap)
   int padding = 2;           // texels kept empty around every object (see packAtlas)

@@ -20,6 +20,7 @@
 #include "src/parallel.h"
 #include "src/sampling.h"
 #include "src/sh_projection.h"
+#include "src/text_file.h"
 
 namespace kiln {
 
@@ -363,6 +364,7 @@ Result<std::vector<vec3>> parseProbePositions(std::string_view text, std::string
 }
 
 Result<std::vector<vec3>> loadProbePositions(const std::string& path) {
+  if (Status regular = checkRegularFile(path); !regular) return Error{regular.error()};
   std::ifstream in(path, std::ios::binary);
   if (!in) return Error{path + ": cannot open"};
   std::ostringstream text;

@@ -30,6 +30,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 #include <map>
+#include <tuple>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -62,6 +63,11 @@ const char* const kTextureSourceExtensions[] = {"MSFT_texture_dds", "EXT_texture
 // hostile, and this bounds what a small file can make the loader allocate.
 constexpr uint64_t kMaxMeshoptExpansion = 128;
 constexpr uint64_t kMeshoptSlack = 4096;
+// Accessor elements without a bufferView (docs/limits.md): per accessor and summed over every
+// read of such accessors in one file.
+constexpr uint64_t kMaxElementsWithoutData = 1ull << 24;
+// World-space coordinates of kept triangles, metres per axis (as for probe positions).
+constexpr float kMaxWorldCoordinate = 1e7f;
 
 // Thrown by Loader::fail; caught in loadScene.
 struct LoadFailure {
@@ -76,6 +82,31 @@ std::string trim(std::string s) {
 }
 
 bool isDataUri(const std::string& uri) { return uri.rfind("data:", 0) == 0; }
+
+// The deepest nesting of arrays and objects in JSON text (brackets inside strings do not
+// count), stopping early once past kMaxJsonDepth. Malformed text gives some depth: the parser
+// that follows reports the syntax error.
+int jsonNestingDepth(const char* text, size_t size) {
+  int depth = 0, deepest = 0;
+  bool inString = false;
+  for (size_t i = 0; i < size; ++i) {
+    char c = text[i];
+    if (inString) {
+      if (c == '\\')
+        ++i;
+      else if (c == '"')
+        inString = false;
+    } else if (c == '"') {
+      inString = true;
+    } else if (c == '[' || c == '{') {
+      deepest = std::max(deepest, ++depth);
+      if (deepest > kMaxJsonDepth) break;
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+  return deepest;
+}
 
 uint32_t readU32(const uint8_t* p) {
   return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
@@ -206,6 +237,9 @@ class Loader {
   void readDocument() {
     std::error_code ec;
     if (fs::is_directory(path_, ec)) fail("", "is a directory, not a glTF file");
+    // Regular files only: a FIFO or a device would block the read or never end.
+    if (fs::exists(path_, ec) && !fs::is_regular_file(path_, ec))
+      fail("", "is not a regular file (a FIFO, device or socket)");
     std::ifstream in(path_, std::ios::binary);
     if (!in) fail("", std::string("cannot open the file: ") + std::strerror(errno));
     bytes_.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
@@ -224,13 +258,13 @@ class Loader {
     if (jsonSize == 0) fail("", "empty file");
 
     // Depth-limited so that nesting bombs are refused before anything recursive sees them.
-    auto limitDepth = [this](int depth, Json::parse_event_t, Json&) {
-      if (depth > kMaxJsonDepth)
-        fail("", "JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
-      return true;
-    };
+    // Measured by a scan of its own rather than nlohmann's parser callback: with a callback,
+    // nlohmann searches the parent for discarded values at every object's end, which is
+    // quadratic in an array's length (400,000 empty nodes took 118 s).
+    if (int depth = jsonNestingDepth(jsonBegin, jsonSize); depth > kMaxJsonDepth)
+      fail("", "JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
     try {
-      doc_ = Json::parse(jsonBegin, jsonBegin + jsonSize, limitDepth);
+      doc_ = Json::parse(jsonBegin, jsonBegin + jsonSize);
     } catch (const Json::exception& e) {
       fail("", std::string("malformed JSON: ") + e.what());
     }
@@ -397,6 +431,9 @@ class Loader {
       if (isDataUri(uri)) continue;  // tinygltf decodes and checks its length
       fs::path file = fs::path(baseDir_) / percentDecode(uri);
       std::error_code ec;
+      if (fs::exists(file, ec) && !fs::is_regular_file(file, ec))
+        fail(element + ".uri",
+             "'" + uri + "' is not a regular file (a FIFO, device or directory)");
       if (!fs::is_regular_file(file, ec)) fail(element, "file '" + uri + "' not found");
       uint64_t fileSize = fs::file_size(file, ec);
       if (ec) fail(element, "cannot read '" + uri + "'");
@@ -439,6 +476,9 @@ class Loader {
       const Json& a = accessors[i];
       if (!a.is_object()) fail(element, "must be an object");
       checkIndex(a, "bufferView", element, bufferViews.size(), "bufferViews");
+      // tinygltf reads a negative byteOffset as 0 and a count past 64 bits as something else.
+      unsignedProperty(a, "byteOffset", element, false);
+      unsignedProperty(a, "count", element, true);
       if (auto sparse = a.find("sparse"); sparse != a.end()) {
         if (!sparse->is_object()) fail(element + ".sparse", "must be an object");
         for (const char* part : {"indices", "values"}) {
@@ -503,6 +543,14 @@ class Loader {
       bool hasUri = images[i].contains("uri"), hasView = images[i].contains("bufferView");
       if (hasUri == hasView) fail(element, "must have exactly one of 'uri' and 'bufferView'");
       if (hasUri && !images[i]["uri"].is_string()) fail(element + ".uri", "must be a string");
+      if (hasUri && !isDataUri(images[i]["uri"].get<std::string>())) {
+        // tinygltf reads the file whole: a FIFO or device there would block or never end.
+        fs::path file = fs::path(baseDir_) / percentDecode(images[i]["uri"].get<std::string>());
+        std::error_code ec;
+        if (fs::exists(file, ec) && !fs::is_regular_file(file, ec))
+          fail(element + ".uri", "'" + images[i]["uri"].get<std::string>() +
+                                     "' is not a regular file (a FIFO, device or directory)");
+      }
       if (hasView) {
         size_t view = images[i]["bufferView"].get<size_t>();
         if (isMeshoptView_.count(view))
@@ -920,7 +968,7 @@ class Loader {
                             std::to_string(a.count) + " x stride " + std::to_string(stride) +
                             " runs past bufferViews[" + std::to_string(a.bufferView) + "] (" +
                             std::to_string(view.byteLength) + " bytes)");
-      } else if (a.count > (uint64_t(1) << 24)) {
+      } else if (a.count > kMaxElementsWithoutData) {
         // Without a bufferView the values are zeros (plus sparse entries) that cost the file
         // nothing, so the count alone would decide the allocation: bound it.
         fail(element, "count " + std::to_string(a.count) + " is too large without a bufferView");
@@ -968,6 +1016,17 @@ class Loader {
                         std::to_string(expectedComponents));
     if (componentsOut) *componentsOut = components;
     int size = componentSize(a.componentType);
+    if (a.bufferView < 0) {
+      // Elements without a bufferView cost the file nothing (zeros plus sparse entries), and
+      // any number of primitives may read one accessor: bound the total over the whole load,
+      // so that the work follows the bytes the file really holds.
+      zeroElementsRead_ += a.count;
+      if (zeroElementsRead_ > kMaxElementsWithoutData)
+        fail(element, "read by " + use + ": more than " +
+                          std::to_string(kMaxElementsWithoutData) +
+                          " accessor elements without a bufferView in the whole file (they "
+                          "hold no data: zeros, or sparse values)");
+    }
     std::vector<double> out(a.count * size_t(components), 0.0);
     if (a.bufferView >= 0) {
       const auto& view = model_.bufferViews[size_t(a.bufferView)];
@@ -1148,10 +1207,35 @@ class Loader {
       warn(element, "no image kiln can read (no 'source'), using the factor");
       return -1;
     }
-    const tinygltf::Image& img = model_.images[size_t(tex.source)];
+    // Textures that share an image and sampler state share one decoded kiln texture: many
+    // glTF textures may point at one image (40 over a 4096^2 PNG took 10.6 GB when each was
+    // decoded anew), so the decoding work follows the images, not the texture count.
+    TextureSampler sampler;
+    if (tex.sampler >= 0) {
+      const tinygltf::Sampler& s = model_.samplers[size_t(tex.sampler)];
+      std::string where = "samplers[" + std::to_string(tex.sampler) + "]";
+      sampler.wrapS = wrapMode(s.wrapS, where + ".wrapS");
+      sampler.wrapT = wrapMode(s.wrapT, where + ".wrapT");
+      sampler.nearest = s.magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
+      if (s.magFilter != -1 && s.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST &&
+          s.magFilter != TINYGLTF_TEXTURE_FILTER_LINEAR)
+        fail(where + ".magFilter", "must be 9728 (NEAREST) or 9729 (LINEAR)");
+    }
+    auto key = std::make_tuple(tex.source, int(sampler.wrapS), int(sampler.wrapT),
+                               sampler.nearest);
+    if (auto known = decodedImages_.find(key); known != decodedImages_.end())
+      return known->second;
+    int decoded = decodeImage(t, tex.source, sampler);
+    decodedImages_[key] = decoded;
+    return decoded;
+  }
+
+  int decodeImage(int t, int source, const TextureSampler& sampler) {
+    std::string element = "textures[" + std::to_string(t) + "]";
+    const tinygltf::Image& img = model_.images[size_t(source)];
     std::string label = !img.uri.empty() && !isDataUri(img.uri) ? img.uri
                         : !img.name.empty()                     ? img.name
-                                            : "images[" + std::to_string(tex.source) + "]";
+                                            : "images[" + std::to_string(source) + "]";
     if (img.image.empty()) {
       warn(element, "image '" + label + "' not found, using the factor");
       return -1;
@@ -1159,6 +1243,23 @@ class Loader {
     const auto* data = img.image.data();
     int size = int(img.image.size());
     int w = 0, h = 0, n = 0;
+    // A PNG's size is in its IHDR chunk. Read it here: stb_image refuses PNGs above 2^30 bytes
+    // decoded with "too large", then tries its other formats and reports "unknown image type".
+    static const uint8_t kPngMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (size >= 24 && std::memcmp(data, kPngMagic, 8) == 0 &&
+        std::memcmp(data + 12, "IHDR", 4) == 0) {
+      auto be32 = [&](int at) {
+        return uint32_t(data[at]) << 24 | uint32_t(data[at + 1]) << 16 |
+               uint32_t(data[at + 2]) << 8 | uint32_t(data[at + 3]);
+      };
+      uint64_t pw = be32(16), ph = be32(20);
+      if (pw * ph > kMaxImagePixels || pw > uint64_t(INT32_MAX) || ph > uint64_t(INT32_MAX)) {
+        warn(element, "image '" + label + "' is too large (PNG of " + std::to_string(pw) + "x" +
+                          std::to_string(ph) + " pixels; kiln decodes images of up to " +
+                          std::to_string(kMaxImagePixels) + " pixels), using the factor");
+        return -1;
+      }
+    }
     if (!stbi_info_from_memory(data, size, &w, &h, &n)) {
       warn(element, "image '" + label + "' could not be decoded (" +
                         (stbi_failure_reason() ? stbi_failure_reason() : "unknown format") +
@@ -1167,7 +1268,8 @@ class Loader {
     }
     if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels) {
       warn(element, "image '" + label + "' is too large (" + std::to_string(w) + "x" +
-                        std::to_string(h) + "), using the factor");
+                        std::to_string(h) + " pixels; kiln decodes images of up to " +
+                        std::to_string(kMaxImagePixels) + " pixels), using the factor");
       return -1;
     }
     Texture out;
@@ -1198,16 +1300,7 @@ class Loader {
       sum += glm::dvec4(p[0], p[1], p[2], p[3]);
     }
     out.average = vec4(sum / double(size_t(w) * h));
-    if (tex.sampler >= 0) {
-      const tinygltf::Sampler& s = model_.samplers[size_t(tex.sampler)];
-      std::string where = "samplers[" + std::to_string(tex.sampler) + "]";
-      out.sampler.wrapS = wrapMode(s.wrapS, where + ".wrapS");
-      out.sampler.wrapT = wrapMode(s.wrapT, where + ".wrapT");
-      out.sampler.nearest = s.magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
-      if (s.magFilter != -1 && s.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST &&
-          s.magFilter != TINYGLTF_TEXTURE_FILTER_LINEAR)
-        fail(where + ".magFilter", "must be 9728 (NEAREST) or 9729 (LINEAR)");
-    }
+    out.sampler = sampler;
     scene_.textures.push_back(std::move(out));
     return int(scene_.textures.size() - 1);
   }
@@ -1266,7 +1359,6 @@ class Loader {
                "nodes[" + std::to_string(c) + "] has more than one parent or is its own child");
         parent[size_t(c)] = int(i);
       }
-
     std::vector<int> roots;
     int sceneIndex = -1;
     size_t sceneCount = model_.scenes.size();
@@ -1294,6 +1386,26 @@ class Loader {
     } else {
       for (size_t i = 0; i < nodeCount; ++i)
         if (parent[i] == -1) roots.push_back(int(i));
+    }
+
+    // A cycle (0 -> 1 -> 0) gives every node in it a parent, so no root reaches it and it
+    // would vanish without a word: say so. One walk up the parents per node, stopping at nodes
+    // already walked, keeps this linear in the node count. (A scene that lists a node of a
+    // cycle was refused above: it is not a root.)
+    {
+      std::vector<size_t> walk(nodeCount, 0);  // 0 = not walked yet, else the walk's number
+      for (size_t i = 0; i < nodeCount; ++i) {
+        size_t j = i;
+        while (walk[j] == 0) {
+          walk[j] = i + 1;
+          if (parent[j] < 0) break;
+          j = size_t(parent[j]);
+        }
+        if (walk[j] == i + 1 && parent[j] >= 0)
+          warn("nodes[" + std::to_string(j) + "]",
+               "is part of a cycle of children (glTF nodes must form trees): it and its "
+               "descendants are ignored");
+      }
     }
 
     // Depth-first, iteratively; with single parents and root starts this visits each node
@@ -1904,6 +2016,17 @@ class Loader {
         ++drops->nonFinite;
         continue;
       }
+      // Finite but far: Embree asserts on rays from beyond ~1.8e18, and float spacing there is
+      // kilometres anyway (a node translated by 1e20 aborted the bake).
+      for (vec3 q : {a, b, c})
+        if (glm::any(glm::greaterThan(glm::abs(q), vec3(kMaxWorldCoordinate))))
+        {
+          std::ostringstream where;
+          where << "a vertex lies at (" << q.x << ", " << q.y << ", " << q.z
+                << ") in world space, beyond " << kMaxWorldCoordinate
+                << " m from the origin on an axis (docs/limits.md)";
+          fail(element, where.str());
+        }
       // Zero area relative to the triangle's size (float cross products are noise below
       // ~1e-7 of the edge lengths squared), which also catches repeated indices.
       float maxEdge2 =
@@ -2106,6 +2229,8 @@ class Loader {
   std::set<size_t> isMeshoptView_;
   tinygltf::Model model_;
   std::map<int, int> textureMap_;
+  mutable uint64_t zeroElementsRead_ = 0;  // see readAccessor
+  std::map<std::tuple<int, int, int, bool>, int> decodedImages_;  // (image, sampler) -> texture
   std::vector<glm::dmat4> nodeWorld_;  // world matrices of the loaded scene's nodes
   std::vector<bool> inScene_;
   bool defaultMaterialUsed_ = false;

@@ -27,6 +27,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "src/text_file.h"
+
 namespace kiln {
 
 vec3 Image::rgb(int x, int y) const {
@@ -37,8 +39,17 @@ vec3 Image::rgb(int x, int y) const {
 
 namespace {
 
-// Refuse absurd sizes from corrupt headers before allocating.
-constexpr int64_t kMaxPixels = int64_t(1) << 28;
+// The pixel budget of an HDR image (a sky map, a lightmap page read back): larger images are
+// refused from their header, before anything is allocated. 2^25 pixels is an 8192 x 4096
+// equirectangular map; a sky map costs about 36 bytes a pixel once its sampling tables are
+// built, so a 16384^2 map took 9.7 GB (docs/limits.md).
+constexpr int64_t kMaxPixels = int64_t(1) << 25;
+
+std::string budgetMessage(int64_t w, int64_t h, const char* format) {
+  return std::string(format) + " image of " + std::to_string(w) + " x " + std::to_string(h) +
+         " pixels is empty or larger than kiln's budget of " + std::to_string(kMaxPixels) +
+         " pixels (8192 x 4096): downsample it";
+}
 
 Error fileError(const std::string& path, const std::string& what) {
   return Error{path + ": " + what};
@@ -46,6 +57,8 @@ Error fileError(const std::string& path, const std::string& what) {
 
 Result<Image> readRadiance(const std::string& path) {
   int w = 0, h = 0, comp = 0;
+  if (stbi_info(path.c_str(), &w, &h, &comp) && int64_t(w) * h > kMaxPixels)
+    return fileError(path, budgetMessage(w, h, "Radiance HDR"));
   stbi_set_flip_vertically_on_load(false);
   float* data = stbi_loadf(path.c_str(), &w, &h, &comp, 3);
   if (!data) {
@@ -66,8 +79,7 @@ Result<Image> readExr(const std::string& path) {
     Imath::Box2i dw = header.dataWindow();
     int64_t w = int64_t(dw.max.x) - dw.min.x + 1, h = int64_t(dw.max.y) - dw.min.y + 1;
     if (w <= 0 || h <= 0 || w * h > kMaxPixels)
-      return fileError(path, "OpenEXR data window of " + std::to_string(w) + " x " +
-                                 std::to_string(h) + " pixels is empty or too large");
+      return fileError(path, budgetMessage(w, h, "OpenEXR"));
     if (!file.isComplete()) return fileError(path, "OpenEXR file is truncated or incomplete");
     const Imf::ChannelList& channels = header.channels();
     auto has = [&](const char* name) { return channels.findChannel(name) != nullptr; };
@@ -170,6 +182,8 @@ float toHalfRange(float v) {
 }  // namespace
 
 Result<Image> readHdrImage(const std::string& path) {
+  // Regular files only: a FIFO would block the open, a device never end.
+  if (Status regular = checkRegularFile(path); !regular) return Error{regular.error()};
   std::ifstream in(path, std::ios::binary);
   if (!in)
     return fileError(path, std::string("cannot open image file (") + std::strerror(errno) + ")");

@@ -28,7 +28,16 @@ Status writeTextFileAtomically(const std::string& path, std::string_view text) {
   return Status::success();
 }
 
+Status checkRegularFile(const std::string& path) {
+  std::error_code ec;
+  std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(st) || std::filesystem::is_regular_file(st))
+    return Status::success();
+  return Error{path + ": is not a regular file (a FIFO, device, socket or directory)"};
+}
+
 Result<nlohmann::json> readJsonFile(const std::string& path) {
+  if (Status regular = checkRegularFile(path); !regular) return Error{regular.error()};
   std::ifstream in(path, std::ios::binary);
   if (!in) return Error{path + ": cannot open"};
   try {

@@ -18,6 +18,13 @@ Status writeTextFileAtomically(const std::string& path, std::string_view text);
 
 // Reads and parses a JSON file (manifests, indexes, sphere lists). Errors name the file:
 // "<path>: cannot open", "<path>: malformed JSON: <the parser's message>".
+// Regular files only: a FIFO, device or socket also refused ("<path>: is not a regular file
+// ..."), since reading one can block forever or never end.
 Result<nlohmann::json> readJsonFile(const std::string& path);
+
+// Success when `path` is missing (the open that follows reports it) or a regular file (or a
+// link to one); otherwise "<path>: is not a regular file (a FIFO, device, socket or
+// directory)". Every kiln reader calls it before opening its input (docs/limits.md).
+Status checkRegularFile(const std::string& path);
 
 }  // namespace kiln

@@ -7,7 +7,9 @@
 #                                       and the npm packages of tools/web (three.js,
 #                                       puppeteer-core, gltf-validator, pngjs: the browser and
 #                                       glTF-Validator tests, docs/threejs.md) with `npm ci`, at
-#                                       the versions pinned in tools/web/package-lock.json
+#                                       the versions pinned in tools/web/package-lock.json;
+#                                       and clang with libFuzzer (tests/fuzz/run.sh, the fuzz
+#                                       smoke run of .ci/run)
 set -euo pipefail
 test_tools=0
 case "${1:-}" in
@@ -28,6 +30,8 @@ apt-get install -y -qq --no-install-recommends \
 # The browser test drives Debian's Chromium (headless, SwiftShader WebGL) through
 # puppeteer-core, which downloads no browser of its own.
 apt-get install -y -qq --no-install-recommends pkg-config chromium ca-certificates > /dev/null
+# libFuzzer harnesses (tests/fuzz): Debian 12's clang 14 and its libFuzzer.
+apt-get install -y -qq --no-install-recommends clang libfuzzer-14-dev > /dev/null
 # Node.js and npm: Debian's, unless a node with npm is installed already (another
 # distribution's nodejs package ships npm itself and conflicts with Debian's npm).
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then

@@ -32,6 +32,12 @@ Result<std::vector<uint8_t>> readHeaderSizedFile(
     const std::string& path, size_t headerSize,
     const std::function<Result<uint64_t>(const uint8_t* header, uint64_t available)>&
         expectedSize) {
+  // Regular files only, checked before opening: opening a FIFO blocks until a writer comes,
+  // and a device (/dev/zero) has no end to read to.
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (!ec && std::filesystem::exists(st) && !std::filesystem::is_regular_file(st))
+    return Error{path + ": is not a regular file (a FIFO, device, socket or directory)"};
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return Error{path + ": cannot open"};
   struct Closer {
