@@ -310,12 +310,13 @@ TEST(HostileGenerated, InfoOnEveryCase) {
 }
 
 // Bakes where the bake itself is what a case attacks: transforms past float range (Embree),
-// and scene settings past the CLI's ranges (the texel budget).
+// scene settings past the CLI's ranges (the texel budget), and a chain of 100,000 nested
+// nodes (the output glTF writer composed every node's chain again: minutes).
 TEST(HostileGenerated, BakeTransformsAndSettings) {
   SKIP_WITHOUT_HOSTILE();
   const std::string& gen = generatedDir();
   for (const char* name : {"translate_1e20", "translate_3e38", "scale_1e30", "scale_1e19",
-                           "scale_1e-30", "extras_res_1e6_max_65536"}) {
+                           "scale_1e-30", "extras_res_1e6_max_65536", "deep_100k"}) {
     std::string dir = makeTempDir("kiln_hostile");
     KilnRun r = runKiln({"bake", gen + "/" + name + ".gltf", "--out", dir + "/out", "--preset",
                      "preview", "--quiet"},
