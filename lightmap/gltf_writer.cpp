@@ -1161,7 +1161,7 @@ class OutputGltfBuilder {
         move(view["extensions"]["EXT_meshopt_compression"]);
     }
     // Buffer 0 must exist for the kept ones to be 1, 2, ...
-    if (!keptBuffers_.empty() && chunk_.empty()) chunk_.resize(4, 0);
+    if (!keptBuffers_.empty() && chunk_.empty()) chunk_ = std::vector<uint8_t>(4, 0);
     return Status::success();
   }
 

@@ -106,9 +106,10 @@ class CliProgressTest : public ::testing::Test {
     const std::string errFile = dir + "/stderr.txt";
     std::string ignored;
     // In a subshell: runCommand appends its own 2>&1, which must not undo ours.
-    const int code = test::runCommand("(" + std::string(test::kilnExe()) + " " + args + " 2>" +
-                                          errFile + " >/dev/null)",
-                                      &ignored);
+    std::string command = "(";
+    command.append(test::kilnExe()).append(" ").append(args);
+    command.append(" 2>").append(errFile).append(" >/dev/null)");
+    const int code = test::runCommand(command, &ignored);
     *err = test::readTextFile(errFile);
     return code;
   }

@@ -36,6 +36,14 @@ namespace {
 using Json = nlohmann::json;
 namespace fs = std::filesystem;
 
+// Load options for glTF scene `n` (designated initializers would leave the other fields to
+// -Wmissing-field-initializers).
+LoadOptions sceneOption(int n) {
+  LoadOptions o;
+  o.scene = n;
+  return o;
+}
+
 constexpr int kI8 = 5120, kU8 = 5121, kI16 = 5122, kU16 = 5123, kU32 = 5125, kF32 = 5126;
 
 using test::append;
@@ -657,12 +665,12 @@ TEST(GltfCoverage, SceneOptionChoosesTheScene) {
   EXPECT_EQ(d.objects[0].name, "first");
   EXPECT_TRUE(hasWarning(d, "scene 0 of 3 loaded")) << (d.warnings.empty() ? "" : d.warnings[0]);
   EXPECT_TRUE(hasWarning(d, "--scene"));
-  Scene s = load(path, LoadOptions{.scene = 1});
+  Scene s = load(path, sceneOption(1));
   ASSERT_EQ(s.objects.size(), 1u);
   EXPECT_EQ(s.objects[0].name, "second");
   EXPECT_EQ(maxY(s), 2.0f);
   EXPECT_FALSE(hasWarning(s, "--scene"));
-  std::string e = loadError(path, LoadOptions{.scene = 3});
+  std::string e = loadError(path, sceneOption(3));
   EXPECT_NE(e.find("scene 3"), std::string::npos) << e;
   EXPECT_NE(e.find("3 scene(s)"), std::string::npos) << e;
 }

@@ -672,7 +672,9 @@ TEST(OutputGltf, OutputSceneIsTheBakedScene) {
   g["scene"] = 0;  // the default is the one-node scene
   test::writeTextFile(dir + "/two.gltf", g.dump(1));
   const std::string path = dir + "/two.gltf";
-  Result<Scene> s = loadScene(path, LoadOptions{.scene = 1});
+  LoadOptions second;
+  second.scene = 1;
+  Result<Scene> s = loadScene(path, second);
   ASSERT_TRUE(s.ok()) << s.error();
   ASSERT_GT(s->objects.size(), 1u);
   for (bool glb : {false, true}) {
@@ -682,7 +684,9 @@ TEST(OutputGltf, OutputSceneIsTheBakedScene) {
     const Status st = writeLightmapOutputs(path, constantResult(*s), LightmapBakeSettings{}, out);
     ASSERT_TRUE(st.ok()) << st.error();
     const std::string file = out.outDir + (glb ? "/two.glb" : "/two.gltf");
-    if (!glb) EXPECT_EQ(readJson(file)["scene"], 1);
+    if (!glb) {
+      EXPECT_EQ(readJson(file)["scene"], 1);
+    }
     const Scene back = load(file);  // its default scene
     EXPECT_EQ(back.objects.size(), s->objects.size());
     expectSameTriangles(*s, back, file);

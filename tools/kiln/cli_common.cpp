@@ -90,17 +90,32 @@ std::string probeWritable(const fs::path& dir) {
   return "";
 }
 
+// Prints "OPTION PATH: why" and returns kExitBadInput.
+int failOutput(const std::string& option, const std::string& path, const std::string& why) {
+  printError(option + " " + path + ": " + why);
+  return kExitBadInput;
+}
+
+// `path` made absolute; an empty string in `why` unless it is empty or cannot be.
+fs::path absoluteOutput(const std::string& path, std::string& why) {
+  if (path.empty()) {
+    why = "empty path";
+    return {};
+  }
+  std::error_code ec;
+  fs::path p = fs::absolute(fs::path(path), ec);
+  if (ec) why = ec.message();
+  return p;
+}
+
 }  // namespace
 
 int checkOutputDirectory(const std::string& option, const std::string& path) {
-  auto fail = [&](const std::string& why) {
-    printError(option + " " + path + ": " + why);
-    return kExitBadInput;
-  };
-  if (path.empty()) return fail("empty path");
+  auto fail = [&](const std::string& why) { return failOutput(option, path, why); };
+  std::string why;
+  const fs::path p = absoluteOutput(path, why);
+  if (!why.empty()) return fail(why);
   std::error_code ec;
-  fs::path p = fs::absolute(fs::path(path), ec);
-  if (ec) return fail(ec.message());
   // The nearest existing ancestor (or the path itself) must be a directory: mkdir fails
   // under a regular file.
   fs::path existing = p;
@@ -113,24 +128,23 @@ int checkOutputDirectory(const std::string& option, const std::string& path) {
     return fail(existing == p ? "exists and is not a directory"
                               : existing.string() + " is not a directory, so the directory "
                                                     "cannot be created");
-  if (std::string why = probeWritable(existing); !why.empty()) return fail(why);
+  const std::string notWritable = probeWritable(existing);
+  if (!notWritable.empty()) return fail(notWritable);
   return kExitOk;
 }
 
 int checkOutputFile(const std::string& option, const std::string& path) {
-  auto fail = [&](const std::string& why) {
-    printError(option + " " + path + ": " + why);
-    return kExitBadInput;
-  };
-  if (path.empty()) return fail("empty path");
+  auto fail = [&](const std::string& why) { return failOutput(option, path, why); };
+  std::string why;
+  const fs::path p = absoluteOutput(path, why);
+  if (!why.empty()) return fail(why);
   std::error_code ec;
-  fs::path p = fs::absolute(fs::path(path), ec);
-  if (ec) return fail(ec.message());
   if (fs::is_directory(p, ec)) return fail("is a directory");
   const fs::path dir = p.parent_path();
   if (!fs::exists(dir, ec)) return fail("directory " + dir.string() + " does not exist");
   if (!fs::is_directory(dir, ec)) return fail(dir.string() + " is not a directory");
-  if (std::string why = probeWritable(dir); !why.empty()) return fail(why);
+  const std::string notWritable = probeWritable(dir);
+  if (!notWritable.empty()) return fail(notWritable);
   return kExitOk;
 }
 

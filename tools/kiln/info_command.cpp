@@ -229,7 +229,9 @@ void registerInfoCommand(CLI::App& app) {
   sub->callback(commandCallback([options]() {
     Scene scene;
     // Warnings are part of the report itself, so they are not also printed to stderr.
-    if (int code = loadSceneOrReport(options->scene, LoadOptions{.scene = options->gltfScene}, &scene, false)) return code;
+    LoadOptions load;
+    load.scene = options->gltfScene;
+    if (int code = loadSceneOrReport(options->scene, load, &scene, false)) return code;
     if (options->json)
       std::cout << infoJson(scene).dump(2) << "\n";
     else
