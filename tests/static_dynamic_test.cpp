@@ -103,13 +103,19 @@ void addSunAndSky(Scene& scene) {
   scene.sky = Sky::constant(vec3(0.3f, 0.4f, 0.6f));
 }
 
+// The three scenes the dynamic-box tests compare, under the same sun and sky: the ground
+// alone, the ground with the dynamic box, and (the control) with the box static.
+struct SunlitBoxScenes {
+  Scene without, dynamic, control;
+};
+SunlitBoxScenes sunlitBoxScenes() {
+  SunlitBoxScenes s{groundScene(), groundWithBox(false), groundWithBox(true)};
+  for (Scene* scene : {&s.without, &s.dynamic, &s.control}) addSunAndSky(*scene);
+  return s;
+}
+
 TEST(StaticDynamic, DynamicBoxLeavesTheGroundLightmapBitIdentical) {
-  Scene without = groundScene();
-  addSunAndSky(without);
-  Scene dynamic = groundWithBox(false);
-  addSunAndSky(dynamic);
-  Scene control = groundWithBox(true);
-  addSunAndSky(control);
+  const auto [without, dynamic, control] = sunlitBoxScenes();
 
   const LightmapBakeSettings s = smallSettings();
   auto a = bakeLightmaps(without, s);
@@ -156,12 +162,7 @@ TEST(StaticDynamic, DynamicEmitterLightsNothing) {
 // Probes around (and one inside) the box: SH, validity and visibility maps are identical
 // with the dynamic box and without it.
 TEST(StaticDynamic, DynamicBoxLeavesProbesBitIdentical) {
-  Scene without = groundScene();
-  addSunAndSky(without);
-  Scene dynamic = groundWithBox(false);
-  addSunAndSky(dynamic);
-  Scene control = groundWithBox(true);
-  addSunAndSky(control);
+  const auto [without, dynamic, control] = sunlitBoxScenes();
   const std::vector<vec3> positions = {vec3(0.0f, 0.25f, 0.0f),  // inside the box
                                        vec3(0.6f, 0.3f, 0.0f),  vec3(-0.6f, 0.3f, 0.1f),
                                        vec3(0.0f, 0.3f, 0.6f),  vec3(0.1f, 0.3f, -0.6f),
@@ -217,12 +218,7 @@ TEST(StaticDynamic, DynamicBoxLeavesProbePlacementIdentical) {
     for (const PlacedProbe& p : placed->probes) positions.push_back(p.position);
     return positions;
   };
-  Scene without = groundScene();
-  addSunAndSky(without);
-  Scene dynamic = groundWithBox(false);
-  addSunAndSky(dynamic);
-  Scene control = groundWithBox(true);
-  addSunAndSky(control);
+  const auto [without, dynamic, control] = sunlitBoxScenes();
   const std::vector<vec3> a = place(without), b = place(dynamic), c = place(control);
   ASSERT_GE(a.size(), 4u);
   EXPECT_EQ(a, b);
