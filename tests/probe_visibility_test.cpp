@@ -87,11 +87,8 @@ glm::vec2 texelCentre(int32_t i, int32_t j, int32_t r) {
 // Recomputes a .kprobe image's checksum after its bytes were patched, as serializeProbeSet
 // computes it, so the reader reports the patched field and not "checksum".
 void reseal(std::vector<uint8_t>& b) {
-  uint64_t sum = fnv1a64(std::span<const uint8_t>(b.data(), 64));
-  sum = fnv1a64(
-      std::span<const uint8_t>(b.data() + kProbeFileHeaderSize, b.size() - kProbeFileHeaderSize),
-      sum);
-  std::memcpy(b.data() + 64, &sum, 8);
+  const uint64_t sum = binaryFileChecksum(b, kProbeFileChecksumOffset, kProbeFileHeaderSize);
+  std::memcpy(b.data() + kProbeFileChecksumOffset, &sum, 8);
 }
 
 std::string parseError(const std::vector<uint8_t>& bytes) {

@@ -10,16 +10,14 @@
 #include <vector>
 
 #include "kiln/lppv_volume.h"
-#include "kiln/probe_set.h"  // fnv1a64
+#include "kiln/probe_set.h"  // binaryFileChecksum
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::vector<uint8_t> bytes(data, data + size);
   if (bytes.size() >= kiln::kLppvFileHeaderSize && !(size % 2)) {
-    uint64_t hash = kiln::fnv1a64(std::span<const uint8_t>(bytes.data(), 56));
-    hash = kiln::fnv1a64(std::span<const uint8_t>(bytes.data() + kiln::kLppvFileHeaderSize,
-                                                  bytes.size() - kiln::kLppvFileHeaderSize),
-                         hash);
-    std::memcpy(bytes.data() + 56, &hash, 8);
+    const uint64_t hash = kiln::binaryFileChecksum(bytes, kiln::kLppvFileChecksumOffset,
+                                                   kiln::kLppvFileHeaderSize);
+    std::memcpy(bytes.data() + kiln::kLppvFileChecksumOffset, &hash, 8);
   }
   kiln::Result<kiln::LppvVolume> volume = kiln::parseLppvVolume(bytes, "fuzz.klppv");
   if (volume) {

@@ -16,11 +16,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::vector<uint8_t> bytes(data, data + size);
   if (bytes.size() >= kiln::kProbeFileHeaderSize && !(size % 2)) {
     // Even-sized inputs get a valid checksum; odd-sized ones keep theirs (checksum path).
-    uint64_t hash = kiln::fnv1a64(std::span<const uint8_t>(bytes.data(), 64));
-    hash = kiln::fnv1a64(std::span<const uint8_t>(bytes.data() + kiln::kProbeFileHeaderSize,
-                                                  bytes.size() - kiln::kProbeFileHeaderSize),
-                         hash);
-    std::memcpy(bytes.data() + 64, &hash, 8);
+    const uint64_t hash = kiln::binaryFileChecksum(bytes, kiln::kProbeFileChecksumOffset,
+                                                   kiln::kProbeFileHeaderSize);
+    std::memcpy(bytes.data() + kiln::kProbeFileChecksumOffset, &hash, 8);
   }
   kiln::Result<kiln::ProbeSet> set = kiln::parseProbeSet(bytes, "fuzz.kprobe");
   if (set && !kiln::validateProbeSet(set.value(), "fuzz.kprobe")) std::abort();

@@ -23,7 +23,6 @@ namespace {
 
 constexpr uint64_t kBytesPerCell = 27 * 4 + 4;
 constexpr uint64_t kOcclusionBytesPerCell = 4 * 4;  // version 2 on
-constexpr size_t kChecksumOffset = 56;
 
 Error fail(std::string_view name, const std::string& what) {
   return Error{std::string(name) + ": " + what};
@@ -58,7 +57,7 @@ Header decodeHeader(const uint8_t* h) {
   r.placement = readAt<uint32_t>(h + 20);
   r.reserved[0] = readAt<uint32_t>(h + 48);
   r.reserved[1] = readAt<uint32_t>(h + 52);
-  r.checksum = readAt<uint64_t>(h + kChecksumOffset);
+  r.checksum = readAt<uint64_t>(h + kLppvFileChecksumOffset);
   return r;
 }
 
@@ -307,11 +306,8 @@ std::vector<uint8_t> serializeLppvVolume(const LppvVolume& v, uint32_t version) 
     std::memcpy(out.data() + kLppvFileHeaderSize + shBytes + validityBytes, occlusion.data(),
                 occlusionBytes);
   }
-  uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), kChecksumOffset));
-  sum = fnv1a64(
-      std::span<const uint8_t>(out.data() + kLppvFileHeaderSize, out.size() - kLppvFileHeaderSize),
-      sum);
-  std::memcpy(out.data() + kChecksumOffset, &sum, 8);
+  const uint64_t sum = binaryFileChecksum(out, kLppvFileChecksumOffset, kLppvFileHeaderSize);
+  std::memcpy(out.data() + kLppvFileChecksumOffset, &sum, 8);
   return out;
 }
 
@@ -319,9 +315,7 @@ Result<LppvVolume> parseLppvVolume(std::span<const uint8_t> bytes, std::string_v
   Result<uint64_t> size = checkHeader(bytes.data(), bytes.size(), name);
   if (!size) return Error{size.error()};
   const Header hd = decodeHeader(bytes.data());
-  uint64_t sum = fnv1a64(bytes.subspan(0, kChecksumOffset));
-  sum = fnv1a64(bytes.subspan(kLppvFileHeaderSize), sum);
-  if (sum != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
+  if (binaryFileChecksum(bytes, kLppvFileChecksumOffset, kLppvFileHeaderSize) != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
 
   LppvVolume v;
   v.resolution = glm::ivec3(int(hd.resolution[0]), int(hd.resolution[1]), int(hd.resolution[2]));

@@ -78,7 +78,7 @@ Header decodeHeader(const uint8_t* h) {
     r.gridMax[i] = readAt<float>(h + 48 + 4 * i);
   }
   r.visibilityResolution = readAt<uint32_t>(h + 60);
-  r.checksum = readAt<uint64_t>(h + 64);
+  r.checksum = readAt<uint64_t>(h + kProbeFileChecksumOffset);
   return r;
 }
 
@@ -196,6 +196,11 @@ uint64_t fnv1a64(std::span<const uint8_t> bytes, uint64_t hash) {
     hash *= 1099511628211ull;
   }
   return hash;
+}
+
+uint64_t binaryFileChecksum(std::span<const uint8_t> file, size_t checksumOffset,
+                            size_t headerSize) {
+  return fnv1a64(file.subspan(headerSize), fnv1a64(file.subspan(0, checksumOffset)));
 }
 
 void computeOuterCellCubics(ProbeSet& set) {
@@ -413,11 +418,8 @@ std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
     put(out, s.visibility.maxDistance.data(), s.visibility.maxDistance.size());
     put(out, s.visibility.moments.data(), s.visibility.moments.size());
   }
-  uint64_t sum = fnv1a64(std::span<const uint8_t>(out.data(), 64));
-  sum = fnv1a64(std::span<const uint8_t>(out.data() + kProbeFileHeaderSize,
-                                         out.size() - kProbeFileHeaderSize),
-                sum);
-  std::memcpy(out.data() + 64, &sum, 8);
+  const uint64_t sum = binaryFileChecksum(out, kProbeFileChecksumOffset, kProbeFileHeaderSize);
+  std::memcpy(out.data() + kProbeFileChecksumOffset, &sum, 8);
   return out;
 }
 
@@ -425,9 +427,7 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
   Result<uint64_t> size = checkHeader(bytes.data(), bytes.size(), name);
   if (!size) return Error{size.error()};
   const Header hd = decodeHeader(bytes.data());
-  uint64_t sum = fnv1a64(bytes.subspan(0, 64));
-  sum = fnv1a64(bytes.subspan(kProbeFileHeaderSize), sum);
-  if (sum != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
+  if (binaryFileChecksum(bytes, kProbeFileChecksumOffset, kProbeFileHeaderSize) != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
 
   ProbeSet s;
   s.dimension = int32_t(hd.dimension);

@@ -146,6 +146,7 @@ inline void fillLppvFromProbes(const ProbeSet& set, LppvVolume& volume) noexcept
 inline constexpr uint32_t kLppvFileVersion = 2;
 inline constexpr uint32_t kLppvFileMinVersion = 1;
 inline constexpr size_t kLppvFileHeaderSize = 64;
+inline constexpr size_t kLppvFileChecksumOffset = 56;  // the header's checksum field
 
 // Serialization (no validation: writes what it is given, so tests can craft bad files).
 // `version` 1 drops the occlusion; an empty `occlusion` is written as 1.

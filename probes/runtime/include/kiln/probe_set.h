@@ -154,6 +154,7 @@ Status validateProbeSet(const ProbeSet& set, std::string_view name);
 inline constexpr uint32_t kProbeFileVersion = 3;
 inline constexpr uint32_t kProbeFileMinVersion = 1;
 inline constexpr size_t kProbeFileHeaderSize = 72;
+inline constexpr size_t kProbeFileChecksumOffset = 64;  // the header's checksum field
 
 // Serialization (no validation: write what is given, so tests can craft bad files). `version`
 // 1 drops the occlusion and 2 the visibility (for readers that predate them); an empty
@@ -171,5 +172,10 @@ Result<ProbeSet> loadProbeFile(const std::string& path);
 // FNV-1a 64-bit hash, continuing from `hash` (start with kFnvOffset).
 inline constexpr uint64_t kFnvOffset = 14695981039346656037ull;
 uint64_t fnv1a64(std::span<const uint8_t> bytes, uint64_t hash = kFnvOffset);
+// The checksum a kiln binary file (.kprobe, .klppv) stores in its header at
+// `checksumOffset`: FNV-1a over the header bytes before that field, then over the payload
+// after the `headerSize`-byte header. `file` holds at least `headerSize` bytes.
+uint64_t binaryFileChecksum(std::span<const uint8_t> file, size_t checksumOffset,
+                            size_t headerSize);
 
 }  // namespace kiln
