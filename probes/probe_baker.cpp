@@ -324,8 +324,8 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
 
   if (settings.dering) {
     for (size_t i = 0; i < count; ++i) {
-      DeringResult d = deringSh(set.sh[i]);
-      if (d.windowed) {
+      const WindowDeringResult d = windowDeringSh(set.sh[i]);
+      if (d.changed) {
         set.sh[i] = d.sh;
         ++rep.deringedProbes;
       }

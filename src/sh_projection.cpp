@@ -43,27 +43,37 @@ struct Quadratic {
   }
 };
 
-// Expands E(n) = sum_i A_l c_i Y_i(n) (channel `ch`) into monomials; axes (x, y, z) = 0, 1, 2.
-Quadratic irradianceQuadratic(const ShL2Rgb& sh, int ch) {
-  double s[kShL2Count];
-  for (int i = 0; i < kShL2Count; ++i) s[i] = sh.c[i][ch];
+// Expands E(n) = sum_i e_i Y_i(n), e the irradiance coefficients (A_l c_i), into monomials;
+// axes (x, y, z) = 0, 1, 2.
+Quadratic quadraticOf(const double e[kShL2Count]) {
   Quadratic q{};
-  const double a8 = kA[2] * kY22 * s[8];
-  const double a6 = kA[2] * kY20 * s[6];
-  const double hxy = 0.5 * kA[2] * kY2xy * s[4];
-  const double hyz = 0.5 * kA[2] * kY2xy * s[5];
-  const double hxz = 0.5 * kA[2] * kY2xy * s[7];
+  const double a8 = kY22 * e[8];
+  const double a6 = kY20 * e[6];
+  const double hxy = 0.5 * kY2xy * e[4];
+  const double hyz = 0.5 * kY2xy * e[5];
+  const double hxz = 0.5 * kY2xy * e[7];
   q.m[0][0] = a8;
   q.m[1][1] = -a8;
   q.m[2][2] = 3.0 * a6;
   q.m[0][1] = q.m[1][0] = hxy;
   q.m[1][2] = q.m[2][1] = hyz;
   q.m[0][2] = q.m[2][0] = hxz;
-  q.b[0] = kA[1] * kY1 * s[3];
-  q.b[1] = kA[1] * kY1 * s[1];
-  q.b[2] = kA[1] * kY1 * s[2];
-  q.c = kA[0] * kY00 * s[0] - a6;
+  q.b[0] = kY1 * e[3];
+  q.b[1] = kY1 * e[1];
+  q.b[2] = kY1 * e[2];
+  q.c = kY00 * e[0] - a6;
   return q;
+}
+
+// The irradiance coefficients e_i = A_l c_i of channel `ch`, in double.
+std::array<double, kShL2Count> irradianceCoefficients(const ShL2Rgb& sh, int ch) {
+  std::array<double, kShL2Count> e;
+  for (int i = 0; i < kShL2Count; ++i) e[i] = kA[shBand(i)] * double(sh.c[i][ch]);
+  return e;
+}
+
+Quadratic irradianceQuadratic(const ShL2Rgb& sh, int ch) {
+  return quadraticOf(irradianceCoefficients(sh, ch).data());
 }
 
 // Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations (Golub & Van
@@ -348,16 +358,32 @@ vec3 minIrradiance(const ShL2Rgb& sh, std::array<vec3, 3>* argmin) {
   return result;
 }
 
-DeringResult deringSh(const ShL2Rgb& sh, ShWindowKind kind, float relTolerance) {
-  DeringResult r;
+std::vector<vec3> fibonacciSphere(int n) {
+  std::vector<vec3> out;
+  out.reserve(size_t(std::max(n, 0)));
+  const double golden = kPiD * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / n;
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const double phi = golden * i;
+    out.push_back(vec3(float(r * std::cos(phi)), float(r * std::sin(phi)), float(z)));
+  }
+  return out;
+}
+
+namespace {
+float minOf(vec3 v) { return std::min(v.x, std::min(v.y, v.z)); }
+}  // namespace
+
+WindowDeringResult windowDeringSh(const ShL2Rgb& sh, ShWindowKind kind, float relTolerance) {
+  WindowDeringResult r;
   r.sh = sh;
   r.width = kInfinity;
   r.minIrradianceBefore = minIrradiance(sh);
   r.minIrradianceAfter = r.minIrradianceBefore;
-  auto minOf = [](vec3 v) { return std::min(v.x, std::min(v.y, v.z)); };
   if (minOf(r.minIrradianceBefore) >= 0.0f) return r;  // already fine: untouched
 
-  r.windowed = true;
+  r.changed = true;
   auto minAt = [&](float width) { return minOf(minIrradiance(windowSh(sh, kind, width))); };
   // Width 1 keeps band 0 only, whose irradiance pi Y00 c0 is constant: feasible unless the
   // mean radiance itself is negative, which no window can fix.

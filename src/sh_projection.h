@@ -7,7 +7,7 @@
 //   - ShL2Rgb::irradiance(n) (sh.h): irradiance E(n) in W/m^2 (lux in kiln's units), NOT E/pi.
 //   - toIrradianceSh: SH of E(n) itself (bands scaled by A_l); its evaluate(n) is E(n).
 //   - minIrradiance: per-channel minimum over the sphere of E(n) (not E/pi).
-//   - windowSh / deringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing" below).
+//   - windowSh / windowDeringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing" below).
 //   - packUnitySh9 / evalUnitySh9: E(n) / pi, the outgoing radiance of a white Lambertian
 //     surface, which is what Unity's ambient / probe SH constants evaluate to (and what a
 //     kiln lightmap texel stores).
@@ -16,6 +16,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "src/image.h"
 #include "src/math.h"
@@ -76,7 +77,7 @@ ShL2Rgb projectFunction(const std::function<vec3(vec3)>& radiance, uint32_t samp
 // Irradiance SH: coefficient i multiplied by A_l(i) (Ramamoorthi & Hanrahan 2001, eq. 8:
 // E_lm = A_l L_lm, with A0 = pi, A1 = 2 pi / 3, A2 = pi / 4). The result's evaluate(n) is the
 // irradiance E(n) (equal to radiance.irradiance(n)); multiply by kInvPi for E / pi. Feed only
-// radiance SH to windowSh / deringSh / packUnitySh9, never this.
+// radiance SH to windowSh / windowDeringSh / packUnitySh9, never this.
 ShL2Rgb toIrradianceSh(const ShL2Rgb& radiance);
 
 // ShL1Rgb (sh.h) with bands 0-1 of `sh` (the first 4 coefficients, unchanged).
@@ -128,14 +129,22 @@ inline ShL2Rgb windowSh(const ShL2Rgb& sh, ShWindowKind kind, float width) {
 // minimising normals are written to *argmin when given.
 vec3 minIrradiance(const ShL2Rgb& sh, std::array<vec3, 3>* argmin = nullptr);
 
+// `n` unit vectors spread evenly over the sphere (Fibonacci lattice, golden-angle spiral):
+// equal-area, so plain averages over them approximate averages over the sphere, and a dense
+// set samples every region. Deterministic.
+std::vector<vec3> fibonacciSphere(int n);
+
 struct DeringResult {
-  ShL2Rgb sh;            // windowed radiance SH (== input when nothing was needed)
-  bool windowed = false;  // false: the input's irradiance was already >= 0 everywhere
-  float width = 0.0f;    // window width used (infinite when not windowed)
-  std::array<float, 3> factors{1.0f, 1.0f, 1.0f};
+  ShL2Rgb sh;             // radiance SH (== input when nothing was needed)
+  bool changed = false;   // false: the input's irradiance was already >= 0 everywhere
   vec3 minIrradianceBefore{0.0f};
   vec3 minIrradianceAfter{0.0f};
   bool ok = true;  // false: even band 0 alone is negative (negative mean radiance)
+};
+
+struct WindowDeringResult : DeringResult {
+  float width = 0.0f;  // window width used (infinite when not windowed)
+  std::array<float, 3> factors{1.0f, 1.0f, 1.0f};
 };
 
 // The weakest window of `kind` (largest width, one width for all three channels so the hue
@@ -145,8 +154,8 @@ struct DeringResult {
 // and the largest width that is still negative. An SH whose irradiance is already >= 0 is
 // returned bit-for-bit unchanged. The search stops when the width is known within
 // `relTolerance` (relative).
-DeringResult deringSh(const ShL2Rgb& sh, ShWindowKind kind = ShWindowKind::kSinc4,
-                      float relTolerance = 1e-4f);
+WindowDeringResult windowDeringSh(const ShL2Rgb& sh, ShWindowKind kind = ShWindowKind::kSinc4,
+                                  float relTolerance = 1e-4f);
 
 // ---------------------------------------------------------------------------------------------
 // Unity SH9 packing

@@ -18,20 +18,6 @@
 namespace kiln {
 namespace {
 
-// n points spread evenly over the sphere (Fibonacci / golden-angle spiral).
-std::vector<vec3> fibonacciSphere(int n) {
-  std::vector<vec3> pts;
-  pts.reserve(n);
-  const double golden = 3.14159265358979323846 * (3.0 - std::sqrt(5.0));
-  for (int i = 0; i < n; ++i) {
-    double y = 1.0 - 2.0 * (i + 0.5) / n;
-    double r = std::sqrt(std::max(0.0, 1.0 - y * y));
-    double phi = golden * i;
-    pts.push_back(vec3(float(r * std::cos(phi)), float(y), float(r * std::sin(phi))));
-  }
-  return pts;
-}
-
 ShL2Rgb randomSh(std::mt19937& rng, float dc = 1.0f) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   ShL2Rgb sh;
@@ -296,9 +282,9 @@ TEST(ShProjection, DeringingFindsTheWeakestNonNegativeWindow) {
   ASSERT_LT(minComponent(minIrradiance(sh)), 0.0f);
   ASSERT_LT(denseMinIrradiance(sh), 0.0f);
   for (auto kind : {ShWindowKind::kSinc4, ShWindowKind::kLanczos, ShWindowKind::kHanning}) {
-    DeringResult r = deringSh(sh, kind, 1e-4f);
+    WindowDeringResult r = windowDeringSh(sh, kind, 1e-4f);
     ASSERT_TRUE(r.ok);
-    EXPECT_TRUE(r.windowed);
+    EXPECT_TRUE(r.changed);
     EXPECT_GT(r.width, 1.0f);
     EXPECT_LT(r.width, 100.0f);
     EXPECT_GE(minComponent(r.minIrradianceAfter), 0.0f);
@@ -318,8 +304,8 @@ TEST(ShProjection, DeringingFindsTheWeakestNonNegativeWindow) {
   ShL2Rgb fine;
   fine.c[0] = vec3(1.0f);
   fine.c[1] = vec3(0.3f);
-  DeringResult r = deringSh(fine);
-  EXPECT_FALSE(r.windowed);
+  WindowDeringResult r = windowDeringSh(fine);
+  EXPECT_FALSE(r.changed);
   for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i], fine.c[i]);
 }
 
@@ -387,14 +373,14 @@ void checkEnvMap(const std::string& name) {
   EXPECT_LT(avgRel, 0.12);
 
   // Deringing: never negative over a dense sampling; untouched when it already was not.
-  DeringResult r = deringSh(sh);
+  DeringResult r = windowDeringSh(sh);
   EXPECT_GE(denseMinIrradiance(r.sh), 0.0f);
-  if (!r.windowed) {
+  if (!r.changed) {
     EXPECT_GE(minComponent(r.minIrradianceBefore), 0.0f);
     for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i], sh.c[i]);
   }
-  std::printf("%s: min irradiance %.4g, windowed %d\n", name.c_str(),
-              minComponent(r.minIrradianceBefore), int(r.windowed));
+  std::printf("%s: min irradiance %.4g, deringed %d\n", name.c_str(),
+              minComponent(r.minIrradianceBefore), int(r.changed));
 }
 
 TEST(ShProjection, EnvMapUffizi) { checkEnvMap("uffizi"); }

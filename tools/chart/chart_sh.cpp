@@ -14,20 +14,6 @@
 namespace kiln::chart {
 namespace {
 
-// `n` unit normals spread evenly over the sphere (Fibonacci lattice): equal-area, so plain
-// averages over them approximate averages over the sphere.
-std::vector<vec3> fibonacciNormals(int n) {
-  std::vector<vec3> out;
-  const double golden = kPi * (3.0 - std::sqrt(5.0));
-  for (int i = 0; i < n; ++i) {
-    const double z = 1.0 - (2.0 * i + 1.0) / n;
-    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
-    const double phi = golden * i;
-    out.push_back(vec3(float(r * std::cos(phi)), float(r * std::sin(phi)), float(z)));
-  }
-  return out;
-}
-
 struct Method {
   std::string name;
   std::string window;  // what window was applied
@@ -53,7 +39,7 @@ Result<ChartTable> shIrradianceChart(const ChartOptions& o) {
   }
 
   const int normalCount = o.quick ? 256 : 4096;
-  const std::vector<vec3> normals = fibonacciNormals(normalCount);
+  const std::vector<vec3> normals = fibonacciSphere(normalCount);
   t.columns = {"map", "map_index", "method", "method_index", "window", "avg_rel_error",
                "max_rel_error", "avg_error_over_max", "max_error_over_max", "rms_error_over_max",
                "min_irradiance_over_max"};
@@ -102,7 +88,7 @@ Result<ChartTable> shIrradianceChart(const ChartOptions& o) {
 
     const ShL2Rgb l2 = projectEquirect(map);
     const ShL1Rgb l1 = reduceToL1(l2);
-    const DeringResult dering = deringSh(l2, ShWindowKind::kSinc4);
+    const WindowDeringResult dering = windowDeringSh(l2, ShWindowKind::kSinc4);
     // A fixed window for every map as well: Hanning of width 3 bands (w = 1, 0.75, 0.25), the
     // kind of window a renderer applies without looking (Sloan 2008), so that the chart shows
     // what windowing costs even on maps that need no deringing.
@@ -111,7 +97,7 @@ Result<ChartTable> shIrradianceChart(const ChartOptions& o) {
     std::vector<Method> methods = {
         {"L1", "none", [&](vec3 n) { return l1.irradiance(n); }},
         {"L2", "none", [&](vec3 n) { return l2.irradiance(n); }},
-        {"L2 deringed", dering.windowed ? "sinc4 width " + num(dering.width) : "none needed",
+        {"L2 deringed", dering.changed ? "sinc4 width " + num(dering.width) : "none needed",
          [&](vec3 n) { return dering.sh.irradiance(n); }},
         {"L2 Hanning", "hanning width 3 (" + num(hanningFactors[1]) + ", " +
                            num(hanningFactors[2]) + ")",
@@ -156,7 +142,7 @@ Result<ChartTable> shIrradianceChart(const ChartOptions& o) {
   t.notes.push_back("maps: " + dir + " (" + sizeList + ")");
   t.notes.push_back("SH: projectEquirect (exact per-pixel basis integrals), irradiance by "
                     "Ramamoorthi-Hanrahan (A0 = pi, A1 = 2pi/3, A2 = pi/4); L1 = bands 0-1; "
-                    "L2 deringed = deringSh sinc^4 (the weakest window making E >= 0; the L2 "
+                    "L2 deringed = windowDeringSh sinc^4 (the weakest window making E >= 0; the L2 "
                     "itself when E is already >= 0); L2 Hanning = a fixed Hanning window of "
                     "width 3");
   t.notes.push_back("baseline: brute-force irradiance E(n) = sum over all pixels of L max(0, "
