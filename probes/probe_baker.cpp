@@ -322,16 +322,20 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                            (filled ? "; its SH is the mean of its valid neighbours'" : ""));
   }
 
-  if (settings.dering) {
-    for (size_t i = 0; i < count; ++i) {
-      const WindowDeringResult d = windowDeringSh(set.sh[i]);
-      if (d.changed) {
-        set.sh[i] = d.sh;
-        ++rep.deringedProbes;
-      }
+  if (settings.dering) rep.deringedProbes = deringProbeSh(set.sh);
+  return set;
+}
+
+int32_t deringProbeSh(std::span<ShL2Rgb> sh) {
+  int32_t changed = 0;
+  for (ShL2Rgb& s : sh) {
+    DeringResult d = deringSh(s);
+    if (d.changed) {
+      s = d.sh;
+      ++changed;
     }
   }
-  return set;
+  return changed;
 }
 
 Result<std::vector<vec3>> parseProbePositions(std::string_view text, std::string_view name) {

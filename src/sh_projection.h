@@ -1,13 +1,15 @@
 // sh_projection.h: bake-time spherical-harmonics tools on top of sh.h: projection (from an
 // equirectangular map, from a function, from weighted samples), conversion to irradiance SH,
-// L1 reduction, windowing / deringing, and Unity's 7-vector packing.
+// L1 reduction, windowing, deringing (a constrained least-squares fit, or the older window),
+// and Unity's 7-vector packing.
 //
 // Which quantity each function takes and returns (basis and order: sh.h, MISSION.md):
 //   - projectEquirect / projectFunction / ShL2Accumulator: RADIANCE SH, c_i = int L Y_i dw.
 //   - ShL2Rgb::irradiance(n) (sh.h): irradiance E(n) in W/m^2 (lux in kiln's units), NOT E/pi.
 //   - toIrradianceSh: SH of E(n) itself (bands scaled by A_l); its evaluate(n) is E(n).
 //   - minIrradiance: per-channel minimum over the sphere of E(n) (not E/pi).
-//   - windowSh / windowDeringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing" below).
+//   - windowSh / windowDeringSh / deringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing"
+//     and "Deringing" below).
 //   - packUnitySh9 / evalUnitySh9: E(n) / pi, the outgoing radiance of a white Lambertian
 //     surface, which is what Unity's ambient / probe SH constants evaluate to (and what a
 //     kiln lightmap texel stores).
@@ -77,7 +79,7 @@ ShL2Rgb projectFunction(const std::function<vec3(vec3)>& radiance, uint32_t samp
 // Irradiance SH: coefficient i multiplied by A_l(i) (Ramamoorthi & Hanrahan 2001, eq. 8:
 // E_lm = A_l L_lm, with A0 = pi, A1 = 2 pi / 3, A2 = pi / 4). The result's evaluate(n) is the
 // irradiance E(n) (equal to radiance.irradiance(n)); multiply by kInvPi for E / pi. Feed only
-// radiance SH to windowSh / windowDeringSh / packUnitySh9, never this.
+// radiance SH to windowSh / deringSh / packUnitySh9, never this.
 ShL2Rgb toIrradianceSh(const ShL2Rgb& radiance);
 
 // ShL1Rgb (sh.h) with bands 0-1 of `sh` (the first 4 coefficients, unchanged).
@@ -140,7 +142,42 @@ struct DeringResult {
   vec3 minIrradianceBefore{0.0f};
   vec3 minIrradianceAfter{0.0f};
   bool ok = true;  // false: even band 0 alone is negative (negative mean radiance)
+  // deringSh only: the fit's cutting planes stopped short of E >= 0 and bands 1-2 of some
+  // channel were scaled toward the mean to finish (see deringSh).
+  bool fallback = false;
 };
+
+// Deringing by the nearest non-negative irradiance: per channel, the radiance SH whose
+// irradiance is >= 0 for every normal and that is nearest to `sh` in irradiance, with c0 (the
+// mean radiance, hence the energy) kept exactly. SH whose irradiance is already >= 0
+// everywhere are returned bit-for-bit unchanged.
+//
+// Nearest in irradiance: the L2 distance over the sphere between the fitted and the raw
+// irradiance E(n), in the orthonormal basis sum_i (A_l (c_i - raw_i))^2. The raw L2
+// projection is the best band-limited approximation of the true irradiance, so by
+// Pythagoras this also minimises the L2 distance to the TRUE irradiance among non-negative
+// L2 irradiances. (The distance between radiance coefficients, sum_i (c_i - raw_i)^2, moves
+// band 2 more since A2 = pi / 4 makes it cheap, and was measurably worse at the Cycles
+// reference points: docs/probes.md, "Deringing".)
+//
+// Why not a window: a window scales a whole band by one factor, so the light on the bright
+// side is blurred as much as the ringing on the dark side needs (a probe near a lamp got
+// twice the exact irradiance on the side facing away from the lamp, docs/probes.md). The fit
+// moves the 8 coefficients of bands 1-2 freely, only as far as the constraint needs.
+//
+// Method: the irradiance E(n) = sum_i A_l c_i Y_i(n) is linear in the coefficients, so this is
+// a least-distance problem with one linear constraint per normal (a semi-infinite quadratic
+// program in 8 unknowns). It is solved by cutting planes: constraints at 256 Fibonacci
+// normals, solved exactly as a least-distance program through NNLS (Lawson & Hanson 1974,
+// "Solving Least Squares Problems", ch. 23); then the exact minimum of the fitted
+// irradiance over the sphere (minIrradiance's trust-region solve) is added as a new
+// constraint while it is negative. The constraints ask for E >= 1e-4 x the mean irradiance,
+// so that float rounding cannot take the result below 0. The result is checked with the
+// exact minimum; should the cuts not have converged (not seen in practice), the bands 1-2 are
+// scaled toward the mean until E >= 0 (a window of equal factors, always feasible). Pure
+// arithmetic on the input: deterministic (bit-identical on any thread), ~0.2 ms per SH that
+// needs it (random SH, 3 channels, one core), about as long as windowDeringSh's bisection.
+DeringResult deringSh(const ShL2Rgb& sh);
 
 struct WindowDeringResult : DeringResult {
   float width = 0.0f;  // window width used (infinite when not windowed)
@@ -153,7 +190,8 @@ struct WindowDeringResult : DeringResult {
 // is tested while the width is bisected between 1 (band 0 only: irradiance = pi c0 Y00 >= 0)
 // and the largest width that is still negative. An SH whose irradiance is already >= 0 is
 // returned bit-for-bit unchanged. The search stops when the width is known within
-// `relTolerance` (relative).
+// `relTolerance` (relative). kiln's bake used this before deringSh's fit; it is kept to
+// compare against (docs/charts.md, chart 3).
 WindowDeringResult windowDeringSh(const ShL2Rgb& sh, ShWindowKind kind = ShWindowKind::kSinc4,
                                   float relTolerance = 1e-4f);
 

@@ -16,12 +16,16 @@
 // near-zero axis value would measure nothing. The per-axis relative error (own value) is
 // printed too. Per-channel checks use the same denominator per channel.
 //
-// ProbeReference.CornellBox is the default, fast variant (KILN_PROBE_REF_RAYS rays, default
-// 16384: measured noise ~0.3% of the mean at the worst point, well under the 3% bound);
-// ProbeReferenceSlow.CornellBoxHighQuality (label "slow") uses 4x the rays and 64 bounces.
-// Both skip with a message when ../shared is absent.
+// Deringing is judged against the EXACT values (compareDeringing): the default bake (raw
+// projection + the bake's deringing fit) against Cycles' own unwindowed L2, the floor of the
+// representation.
+//
+// ProbeReference.CornellBox bakes KILN_PROBE_REF_RAYS rays per probe (default 262144, ~8 s
+// of one core) and KILN_PROBE_REF_BOUNCES bounces (default 16). It skips with a message when
+// ../shared is absent.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -35,6 +39,7 @@
 
 #include "probes/probe_baker.h"
 #include "src/gltf_loader.h"
+#include "src/sh_projection.h"
 #include "src/tracer.h"
 #include "tests/test_util.h"
 
@@ -85,7 +90,55 @@ struct Comparison {
   double maxErrFromSh = 0;  // over points and axes, luminance, relative to the point's mean
   double maxErrExact = 0;
   double maxChannelErrFromSh = 0;
+  // compareDeringing: [Cycles' L2, kiln raw, kiln window, kiln default] against exact.
+  double median[4] = {};
+  double p90[4] = {};
+  int deringed = 0;
 };
+
+// Quantile f of `v` (linear interpolation between order statistics).
+double quantile(std::vector<double> v, double f) {
+  std::sort(v.begin(), v.end());
+  const double pos = f * double(v.size() - 1);
+  const size_t i = size_t(pos);
+  const double t = pos - double(i);
+  return i + 1 < v.size() ? v[i] * (1.0 - t) + v[i + 1] * t : v[i];
+}
+
+// Deringing against the EXACT irradiance (the issue's measure): per point and axis, the
+// relative error |E - E_exact| / E_exact of the RGB mean of E, over the 120 point-axes; its
+// median and 90th percentile for Cycles' own unwindowed L2 (the representation's floor),
+// kiln's raw bake, the old window (windowDeringSh) and the bake's default deringing
+// (deringProbeSh, what bakeProbes applies). The relative error of near-zero dark axes is what
+// the p90 measures: there raw L2 goes negative and deringing decides the value.
+void compareDeringing(const std::vector<RefPoint>& ref, const ProbeSet& raw, Comparison& out) {
+  std::vector<ShL2Rgb> fitted(raw.sh.begin(), raw.sh.end());
+  out.deringed = deringProbeSh(fitted);
+  auto mean = [](glm::dvec3 v) { return (v.x + v.y + v.z) / 3.0; };
+  std::vector<double> err[4];  // Cycles L2, raw, window, default
+  for (size_t p = 0; p < ref.size(); ++p) {
+    const ShL2Rgb window = windowDeringSh(raw.sh[p]).sh;
+    for (int a = 0; a < 6; ++a) {
+      const double exact = mean(ref[p].exact[a]);
+      const double value[4] = {mean(ref[p].fromSh[a]), mean(glm::dvec3(raw.sh[p].irradiance(kAxes[a]))),
+                               mean(glm::dvec3(window.irradiance(kAxes[a]))),
+                               mean(glm::dvec3(fitted[p].irradiance(kAxes[a])))};
+      for (int k = 0; k < 4; ++k) err[k].push_back(std::abs(value[k] - exact) / exact);
+      if (fitted[p].c[1] != raw.sh[p].c[1] || fitted[p].c[4] != raw.sh[p].c[4])
+        std::printf("deringed point %zu %s: exact %.4f, Cycles L2 %.4f, raw %.4f, window %.4f, "
+                    "fit %.4f\n", p, kAxisNames[a], exact, value[0], value[1], value[2], value[3]);
+    }
+  }
+  const char* names[4] = {"Cycles' L2", "kiln raw", "kiln window", "kiln default (fit)"};
+  std::printf("error vs exact irradiance (RGB mean, per point and axis), %d of %zu probes "
+              "deringed:\n", out.deringed, ref.size());
+  for (int k = 0; k < 4; ++k) {
+    out.median[k] = quantile(err[k], 0.5);
+    out.p90[k] = quantile(err[k], 0.9);
+    std::printf("  %-19s median %.2f%%  p90 %.2f%%\n", names[k], 100 * out.median[k],
+                100 * out.p90[k]);
+  }
+}
 
 // Bakes the reference points, prints the per-point table and stores the worst errors.
 void compareCornellBox(uint32_t rays, int bounces, Comparison* result) {
@@ -151,6 +204,7 @@ void compareCornellBox(uint32_t rays, int bounces, Comparison* result) {
     out.maxErrFromSh = std::max(out.maxErrFromSh, worstSh);
     out.maxErrExact = std::max(out.maxErrExact, worstExact);
   }
+  compareDeringing(ref, *set, out);
   std::printf("worst over all points: %.2f%% vs from-SH (per channel %.2f%%), %.2f%% vs exact\n",
               100 * out.maxErrFromSh, 100 * out.maxChannelErrFromSh, 100 * out.maxErrExact);
 }
@@ -168,6 +222,12 @@ TEST(ProbeReference, CornellBox) {
   if (testing::Test::IsSkipped()) return;
   EXPECT_LT(c.maxErrFromSh, 0.03);
   EXPECT_LT(c.maxChannelErrFromSh, 0.03);
+  // Issue 13: the default (deringed) bake within 1.1x of the representation's floor at the
+  // median and no worse at p90. Measured at 262144 rays: median 4.91% against Cycles' 4.82%
+  // (window: 6.16%), p90 22.0% against 25.0% (window: 25.6%).
+  EXPECT_GT(c.deringed, 0);  // the measure must include deringed probes to mean anything
+  EXPECT_LE(c.median[3], 1.1 * c.median[0]);
+  EXPECT_LE(c.p90[3], c.p90[0]);
 }
 
 }  // namespace
