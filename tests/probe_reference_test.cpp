@@ -31,9 +31,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -42,49 +40,17 @@
 #include "src/sh_projection.h"
 #include "src/tracer.h"
 #include "tests/test_util.h"
+#include "tools/chart/chart_table.h"
+#include "tools/chart/probe_reference.h"
 
 namespace kiln {
 namespace {
 
-using Json = nlohmann::json;
-
-constexpr const char* kAxisNames[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
-const vec3 kAxes[6] = {vec3(1, 0, 0),  vec3(-1, 0, 0), vec3(0, 1, 0),
-                       vec3(0, -1, 0), vec3(0, 0, 1),  vec3(0, 0, -1)};
+using chart::ProbeReferencePoint;
+constexpr const auto& kAxisNames = chart::kReferenceAxisNames;
+const auto& kAxes = chart::kReferenceAxes;
 
 double lum(glm::dvec3 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
-
-struct RefPoint {
-  vec3 position;
-  std::array<glm::dvec3, 6> exact;   // irradiance_axis
-  std::array<glm::dvec3, 6> fromSh;  // irradiance_axis_from_sh
-  ShL2Rgb sh;                        // sh_radiance
-};
-
-glm::dvec3 rgb(const Json& j) {
-  return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
-}
-
-std::vector<RefPoint> loadReference(const std::string& path) {
-  std::ifstream in(path);
-  Json doc = Json::parse(in);
-  // The file states its SH order; kiln's must be the same (sh.h).
-  const std::vector<std::string> order = doc["header"]["order"];
-  EXPECT_EQ(order, (std::vector<std::string>{"Y00", "Y1-1", "Y10", "Y11", "Y2-2", "Y2-1", "Y20",
-                                             "Y21", "Y22"}));
-  std::vector<RefPoint> points;
-  for (const Json& p : doc["probes"]) {
-    RefPoint r;
-    r.position = vec3(rgb(p["position"]));
-    for (int a = 0; a < 6; ++a) {
-      r.exact[a] = rgb(p["irradiance_axis"][kAxisNames[a]]);
-      r.fromSh[a] = rgb(p["irradiance_axis_from_sh"][kAxisNames[a]]);
-    }
-    for (int i = 0; i < kShL2Count; ++i) r.sh.c[i] = vec3(rgb(p["sh_radiance"][i]));
-    points.push_back(r);
-  }
-  return points;
-}
 
 struct Comparison {
   double maxErrFromSh = 0;  // over points and axes, luminance, relative to the point's mean
@@ -96,22 +62,13 @@ struct Comparison {
   int deringed = 0;
 };
 
-// Quantile f of `v` (linear interpolation between order statistics).
-double quantile(std::vector<double> v, double f) {
-  std::sort(v.begin(), v.end());
-  const double pos = f * double(v.size() - 1);
-  const size_t i = size_t(pos);
-  const double t = pos - double(i);
-  return i + 1 < v.size() ? v[i] * (1.0 - t) + v[i + 1] * t : v[i];
-}
-
 // Deringing against the EXACT irradiance (the measure): per point and axis, the
 // relative error |E - E_exact| / E_exact of the RGB mean of E, over the 120 point-axes; its
 // median and 90th percentile for Cycles' own unwindowed L2 (the representation's floor),
 // kiln's raw bake, the old window (windowDeringSh) and the bake's default deringing
 // (deringProbeSh, what bakeProbes applies). The relative error of near-zero dark axes is what
 // the p90 measures: there raw L2 goes negative and deringing decides the value.
-void compareDeringing(const std::vector<RefPoint>& ref, const ProbeSet& raw, Comparison& out) {
+void compareDeringing(const std::vector<ProbeReferencePoint>& ref, const ProbeSet& raw, Comparison& out) {
   std::vector<ShL2Rgb> fitted(raw.sh.begin(), raw.sh.end());
   out.deringed = deringProbeSh(fitted);
   auto mean = [](glm::dvec3 v) { return (v.x + v.y + v.z) / 3.0; };
@@ -133,8 +90,8 @@ void compareDeringing(const std::vector<RefPoint>& ref, const ProbeSet& raw, Com
   std::printf("error vs exact irradiance (RGB mean, per point and axis), %d of %zu probes "
               "deringed:\n", out.deringed, ref.size());
   for (int k = 0; k < 4; ++k) {
-    out.median[k] = quantile(err[k], 0.5);
-    out.p90[k] = quantile(err[k], 0.9);
+    out.median[k] = chart::quantile(err[k], 0.5);
+    out.p90[k] = chart::quantile(err[k], 0.9);
     std::printf("  %-19s median %.2f%%  p90 %.2f%%\n", names[k], 100 * out.median[k],
                 100 * out.p90[k]);
   }
@@ -154,10 +111,12 @@ void compareCornellBox(uint32_t rays, int bounces, Comparison* result) {
   auto tracer = Tracer::create(*scene);
   EXPECT_TRUE(tracer.ok()) << tracer.error();
   if (!tracer.ok()) return;
-  const std::vector<RefPoint> ref = loadReference(refPath);
+  Result<std::vector<ProbeReferencePoint>> loaded = chart::loadProbeReference(refPath);
+  ASSERT_TRUE(loaded.ok()) << loaded.error();
+  const std::vector<ProbeReferencePoint>& ref = *loaded;
   EXPECT_EQ(ref.size(), 20u);
   std::vector<vec3> positions;
-  for (const RefPoint& r : ref) positions.push_back(r.position);
+  for (const ProbeReferencePoint& r : ref) positions.push_back(r.position);
 
   ProbeBakeSettings settings;
   settings.rays = rays;
@@ -177,7 +136,7 @@ void compareCornellBox(uint32_t rays, int bounces, Comparison* result) {
   std::printf("%5s %5s %9s %9s %9s %8s %8s %8s\n", "point", "axis", "kiln", "cyclesSH", "cycles",
               "errSH", "errExact", "ownSH");
   for (size_t p = 0; p < ref.size(); ++p) {
-    const RefPoint& r = ref[p];
+    const ProbeReferencePoint& r = ref[p];
     glm::dvec3 meanSh(0.0), meanExact(0.0);
     for (int a = 0; a < 6; ++a) meanSh += r.fromSh[a] / 6.0, meanExact += r.exact[a] / 6.0;
     double worstSh = 0, worstExact = 0, truncation = 0;
