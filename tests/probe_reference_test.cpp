@@ -22,7 +22,8 @@
 //
 // ProbeReference.CornellBox bakes KILN_PROBE_REF_RAYS rays per probe (default 262144, ~8 s
 // of one core) and KILN_PROBE_REF_BOUNCES bounces (default 16). It skips with a message when
-// ../shared is absent.
+// ../shared is absent. ProbeReference.ReaderNamesTheFaultyField checks the reader of the
+// reference files on made-up ones.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -32,6 +33,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -187,6 +189,59 @@ TEST(ProbeReference, CornellBox) {
   EXPECT_GT(c.deringed, 0);  // the measure must include deringed probes to mean anything
   EXPECT_LE(c.median[3], 1.1 * c.median[0]);
   EXPECT_LE(c.p90[3], c.p90[0]);
+}
+
+// The reader (tools/chart/probe_reference.h) on a minimal valid file and on broken ones: the
+// message names the file and the field.
+TEST(ProbeReference, ReaderNamesTheFaultyField) {
+  const std::string dir = test::makeTempDir("kiln_probe_reference");
+  auto write = [&](const std::string& name, const nlohmann::json& doc) {
+    test::writeTextFile(dir + "/" + name, doc.dump());
+    return dir + "/" + name;
+  };
+  nlohmann::json axes;
+  for (const char* a : kAxisNames) axes[a] = {1.0, 2.0, 3.0};
+  nlohmann::json probe = {{"position", {0.5, 1.0, -0.5}},
+                          {"irradiance_axis", axes},
+                          {"irradiance_axis_from_sh", axes},
+                          {"sh_radiance", nlohmann::json::array()}};
+  for (int i = 0; i < kShL2Count; ++i) probe["sh_radiance"].push_back({0.1 * i, 0.0, 1.0});
+  const nlohmann::json header = {
+      {"order", {"Y00", "Y1-1", "Y10", "Y11", "Y2-2", "Y2-1", "Y20", "Y21", "Y22"}}};
+  const nlohmann::json good = {{"header", header}, {"probes", {probe}}};
+
+  auto ok = chart::loadProbeReference(write("good.json", good));
+  ASSERT_TRUE(ok.ok()) << ok.error();
+  ASSERT_EQ(ok->size(), 1u);
+  EXPECT_EQ((*ok)[0].position, vec3(0.5f, 1.0f, -0.5f));
+  EXPECT_EQ((*ok)[0].exact[5], glm::dvec3(1.0, 2.0, 3.0));
+  EXPECT_EQ((*ok)[0].sh.c[8], vec3(0.8f, 0.0f, 1.0f));
+
+  auto expectError = [&](const std::string& name, const nlohmann::json& doc,
+                         const std::string& field) {
+    auto r = chart::loadProbeReference(write(name, doc));
+    ASSERT_FALSE(r.ok()) << name;
+    EXPECT_NE(r.error().find(name), std::string::npos) << r.error();
+    EXPECT_NE(r.error().find(field), std::string::npos) << r.error();
+  };
+  nlohmann::json bad = good;
+  bad["header"]["order"][1] = "Y11";
+  expectError("order.json", bad, "header.order");
+  bad = good;
+  bad["probes"][0]["irradiance_axis"].erase("-z");
+  expectError("axis.json", bad, "probes[0].irradiance_axis.-z");
+  bad = good;
+  bad["probes"][0]["sh_radiance"].erase(8);
+  expectError("sh.json", bad, "probes[0].sh_radiance");
+  bad = good;
+  bad["probes"][0]["position"] = {1.0, "two", 3.0};
+  expectError("position.json", bad, "probes[0].position");
+  expectError("array.json", nlohmann::json::array({1, 2}), "header.order");
+  test::writeTextFile(dir + "/broken.json", "{\"header\": ");
+  auto broken = chart::loadProbeReference(dir + "/broken.json");
+  ASSERT_FALSE(broken.ok());
+  EXPECT_NE(broken.error().find("broken.json"), std::string::npos) << broken.error();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
