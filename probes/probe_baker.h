@@ -131,8 +131,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
 // compared with the default one: every SH whose irradiance goes negative for some normal is
 // replaced by deringSh's fit (src/sh_projection.h: the nearest SH in irradiance, c0 kept,
 // whose irradiance is >= 0 for every normal); the others are untouched. Returns how many
-// changed. Deterministic.
-int32_t deringProbeSh(std::span<ShL2Rgb> sh);
+// changed. Each probe on its own (parallelFor over `threads`, 0 = all cores): bit-identical
+// for any thread count.
+int32_t deringProbeSh(std::span<ShL2Rgb> sh, int threads = 0);
 
 // Each probe's visibility maxDistance D for a bake at `positions`: settings.visibilityMaxDistance
 // when > 0, else per probe the distance to the farthest corner of the static objects' bounds
