@@ -79,9 +79,15 @@ Quadratic irradianceQuadratic(const ShL2Rgb& sh, int ch) {
 // The basis (sh.h's order and constants) in double.
 std::array<double, kShL2Count> basisL2(const double n[3]) {
   const double x = n[0], y = n[1], z = n[2];
-  return {kY00,           kY1 * y,         kY1 * z,
-          kY1 * x,        kY2xy * x * y,   kY2xy * y * z,
-          kY20 * (3.0 * z * z - 1.0), kY2xy * x * z, kY22 * (x * x - y * y)};
+  return {kY00,
+          kY1 * y,
+          kY1 * z,
+          kY1 * x,
+          kY2xy * x * y,
+          kY2xy * y * z,
+          kY20 * (3.0 * z * z - 1.0),
+          kY2xy * x * z,
+          kY22 * (x * x - y * y)};
 }
 
 // Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations (Golub & Van
@@ -589,8 +595,7 @@ DeringResult deringSh(const ShL2Rgb& sh) {
     std::array<double, kShL2Count> raw;
     for (int i = 0; i < kShL2Count; ++i) raw[size_t(i)] = e[size_t(i)] / mean;
     const std::array<double, kShL2Count> z = fitNonNegative(raw, kMargin);
-    for (int i = 1; i < kShL2Count; ++i)
-      r.sh.c[i][ch] = float(z[size_t(i)] * mean / kA[shBand(i)]);
+    for (int i = 1; i < kShL2Count; ++i) r.sh.c[i][ch] = float(z[size_t(i)] * mean / kA[shBand(i)]);
   }
   // The guarantee: should the cuts have stopped short, or float rounding of the coefficients
   // have dipped below 0, scale bands 1-2 of that channel toward the mean. E_t = m0 + t (E -

@@ -137,8 +137,8 @@ vec3 minIrradiance(const ShL2Rgb& sh, std::array<vec3, 3>* argmin = nullptr);
 std::vector<vec3> fibonacciSphere(int n);
 
 struct DeringResult {
-  ShL2Rgb sh;             // radiance SH (== input when nothing was needed)
-  bool changed = false;   // false: the input's irradiance was already >= 0 everywhere
+  ShL2Rgb sh;            // radiance SH (== input when nothing was needed)
+  bool changed = false;  // false: the input's irradiance was already >= 0 everywhere
   vec3 minIrradianceBefore{0.0f};
   vec3 minIrradianceAfter{0.0f};
   bool ok = true;  // false: even band 0 alone is negative (negative mean radiance)

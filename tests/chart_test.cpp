@@ -3,12 +3,12 @@
 // fix: lightmap error falls as 1/sqrt(samples) (log-log slope near -1/2), L2 irradiance is
 // closer to brute-force integration than L1 (orthogonality of the SH bands), deringed L2
 // irradiance is never negative and the deringing fit is nearer the exact irradiance than the
-// window (it is the projection onto the non-negative irradiances), TetGen and CGAL build the same Delaunay tetrahedralization,
-// every lookup method finds the tetrahedron brute force finds, per-probe visibility stops the
-// light that plain blending leaks through the sunlit wall of two_rooms and two_rooms_thin.
-// PNGs exist when gnuplot is installed; without gnuplot the CSVs are written and the exit code
-// names the package.
-// No timing is asserted (timings are only required to be positive).
+// window (it is the projection onto the non-negative irradiances), TetGen and CGAL build the same
+// Delaunay tetrahedralization, every lookup method finds the tetrahedron brute force finds,
+// per-probe visibility stops the light that plain blending leaks through the sunlit wall of
+// two_rooms and two_rooms_thin. PNGs exist when gnuplot is installed; without gnuplot the CSVs are
+// written and the exit code names the package. No timing is asserted (timings are only required to
+// be positive).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -70,7 +70,8 @@ struct Comparison {
 // kiln's raw bake, the old window (windowDeringSh) and the bake's default deringing
 // (deringProbeSh, what bakeProbes applies). The relative error of near-zero dark axes is what
 // the p90 measures: there raw L2 goes negative and deringing decides the value.
-void compareDeringing(const std::vector<ProbeReferencePoint>& ref, const ProbeSet& raw, Comparison& out) {
+void compareDeringing(const std::vector<ProbeReferencePoint>& ref, const ProbeSet& raw,
+                      Comparison& out) {
   std::vector<ShL2Rgb> fitted(raw.sh.begin(), raw.sh.end());
   out.deringed = deringProbeSh(fitted);
   auto mean = [](glm::dvec3 v) { return (v.x + v.y + v.z) / 3.0; };
@@ -79,18 +80,23 @@ void compareDeringing(const std::vector<ProbeReferencePoint>& ref, const ProbeSe
     const ShL2Rgb window = windowDeringSh(raw.sh[p]).sh;
     for (int a = 0; a < 6; ++a) {
       const double exact = mean(ref[p].exact[a]);
-      const double value[4] = {mean(ref[p].fromSh[a]), mean(glm::dvec3(raw.sh[p].irradiance(kAxes[a]))),
+      const double value[4] = {mean(ref[p].fromSh[a]),
+                               mean(glm::dvec3(raw.sh[p].irradiance(kAxes[a]))),
                                mean(glm::dvec3(window.irradiance(kAxes[a]))),
                                mean(glm::dvec3(fitted[p].irradiance(kAxes[a])))};
       for (int k = 0; k < 4; ++k) err[k].push_back(std::abs(value[k] - exact) / exact);
       if (fitted[p].c[1] != raw.sh[p].c[1] || fitted[p].c[4] != raw.sh[p].c[4])
-        std::printf("deringed point %zu %s: exact %.4f, Cycles L2 %.4f, raw %.4f, window %.4f, "
-                    "fit %.4f\n", p, kAxisNames[a], exact, value[0], value[1], value[2], value[3]);
+        std::printf(
+            "deringed point %zu %s: exact %.4f, Cycles L2 %.4f, raw %.4f, window %.4f, "
+            "fit %.4f\n",
+            p, kAxisNames[a], exact, value[0], value[1], value[2], value[3]);
     }
   }
   const char* names[4] = {"Cycles' L2", "kiln raw", "kiln window", "kiln default (fit)"};
-  std::printf("error vs exact irradiance (RGB mean, per point and axis), %d of %zu probes "
-              "deringed:\n", out.deringed, ref.size());
+  std::printf(
+      "error vs exact irradiance (RGB mean, per point and axis), %d of %zu probes "
+      "deringed:\n",
+      out.deringed, ref.size());
   for (int k = 0; k < 4; ++k) {
     out.median[k] = chart::quantile(err[k], 0.5);
     out.p90[k] = chart::quantile(err[k], 0.9);

@@ -456,10 +456,11 @@ TEST(ShProjection, DeringFitOfADirectionalLightMatchesA2dSearch) {
   // The window deringing, for comparison, moves further: both bands scaled.
   const glm::dvec3 pw = zonal(windowDeringSh(raw).sh);
   EXPECT_GT(dist(pw.y, pw.z), 10.0 * dist(pf.y, pf.z));
-  std::printf("directional light: raw E(t) = 0.25 + 0.5 t + 0.15625 (3t^2-1); fit %.5f t + "
-              "%.5f (3t^2-1) (grid %.4f, %.4f); window %.5f t + %.5f (3t^2-1); distance fit "
-              "%.4g window %.4g\n", pf.y, pf.z, b1, b2, pw.y, pw.z, dist(pf.y, pf.z),
-              dist(pw.y, pw.z));
+  std::printf(
+      "directional light: raw E(t) = 0.25 + 0.5 t + 0.15625 (3t^2-1); fit %.5f t + "
+      "%.5f (3t^2-1) (grid %.4f, %.4f); window %.5f t + %.5f (3t^2-1); distance fit "
+      "%.4g window %.4g\n",
+      pf.y, pf.z, b1, b2, pw.y, pw.z, dist(pf.y, pf.z), dist(pw.y, pw.z));
 }
 
 // Only the channels and SH that need it change; the result is a pure function of the input.

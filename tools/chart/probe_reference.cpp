@@ -31,8 +31,8 @@ bool fieldTriple(const Json& parent, const char* key, glm::dvec3& out) {
 Result<std::vector<ProbeReferencePoint>> loadProbeReference(const std::string& path) {
   Result<Json> doc = readJsonFile(path);
   if (!doc) return Error{doc.error()};
-  const std::vector<std::string> kOrder = {"Y00", "Y1-1", "Y10", "Y11", "Y2-2",
-                                           "Y2-1", "Y20", "Y21", "Y22"};
+  const std::vector<std::string> kOrder = {"Y00",  "Y1-1", "Y10", "Y11", "Y2-2",
+                                           "Y2-1", "Y20",  "Y21", "Y22"};
   const Json& root = *doc;
   if (!root.is_object() || !root.contains("header") || !root["header"].is_object() ||
       !root["header"].contains("order") || root["header"]["order"] != Json(kOrder))
@@ -54,8 +54,7 @@ Result<std::vector<ProbeReferencePoint>> loadProbeReference(const std::string& p
       for (int a = 0; a < 6; ++a)
         if (!j.is_object() || !j.contains(field) ||
             !fieldTriple(j[field], kReferenceAxisNames[a], values[size_t(a)]))
-          return Error{where + "." + field + "." + kReferenceAxisNames[a] +
-                       ": expected 3 numbers"};
+          return Error{where + "." + field + "." + kReferenceAxisNames[a] + ": expected 3 numbers"};
     }
     if (!j.contains("sh_radiance") || !j["sh_radiance"].is_array() ||
         j["sh_radiance"].size() != size_t(kShL2Count))
