@@ -99,6 +99,8 @@ ShL1Rgb reduceToL1(const ShL2Rgb& sh);
 // irradiance E0 along s, E(n) = E0 (1/4 + t/2 + 5/32 (3t^2 - 1)), t = n.s, has a minimum
 // of -0.0396 E0 at t = -8/15). Tapering the higher bands removes the ringing at the cost of
 // some blur (Sloan 2008 "Stupid SH Tricks"; Sloan 2017 "Deringing Spherical Harmonics").
+// The bake's deringing (deringSh below) does not window: it moves bands 1-2 only as far as
+// E >= 0 needs, which costs far less accuracy (docs/probes.md, "Deringing").
 
 enum class ShWindowKind {
   // Filament cmgen's window: (sin(x) / x)^4, x = pi l / width (the sinc applied 4 times);
