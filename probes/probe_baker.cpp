@@ -322,16 +322,30 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                            (filled ? "; its SH is the mean of its valid neighbours'" : ""));
   }
 
-  if (settings.dering) {
-    for (size_t i = 0; i < count; ++i) {
-      DeringResult d = deringSh(set.sh[i]);
-      if (d.windowed) {
-        set.sh[i] = d.sh;
-        ++rep.deringedProbes;
-      }
-    }
-  }
+  if (settings.dering) rep.deringedProbes = deringProbeSh(set.sh, settings.threads);
   return set;
+}
+
+int32_t deringProbeSh(std::span<ShL2Rgb> sh, int threads) {
+  std::vector<char> changed(sh.size(), 0);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 64;  // ~0.2 ms per probe that needs the fit, ~3 us per probe that does not
+  parallelFor(
+      sh.size(),
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          DeringResult d = deringSh(sh[i]);
+          if (d.changed) {
+            sh[i] = d.sh;
+            changed[i] = 1;
+          }
+        }
+      },
+      options);
+  int32_t count = 0;
+  for (char c : changed) count += c;
+  return count;
 }
 
 Result<std::vector<vec3>> parseProbePositions(std::string_view text, std::string_view name) {

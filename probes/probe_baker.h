@@ -74,9 +74,10 @@ struct ProbeBakeSettings {
   // and, with fillInvalid, its SH is replaced by the mean of its valid neighbours'.
   float invalidBackfaceRatio = 0.25f;
   bool fillInvalid = true;
-  // Window (Sloan 2017) the radiance SH of probes whose reconstructed irradiance goes
-  // negative somewhere, with the weakest sinc^4 window that makes it >= 0; probes whose
-  // irradiance is already >= 0 everywhere are left bit-for-bit unchanged.
+  // Dering the radiance SH of probes whose reconstructed irradiance goes negative somewhere:
+  // the nearest SH (in irradiance, c0 kept) whose irradiance is >= 0 for every normal
+  // (deringProbeSh); probes whose irradiance is already >= 0 everywhere are left bit-for-bit
+  // unchanged.
   bool dering = true;
   // Per-probe visibility for leak-free blending (kiln/probe_visibility.h): the side of each
   // probe's octahedral depth-moment map, 0 = none (plain barycentric blending at run time).
@@ -94,7 +95,7 @@ struct ProbeBakeReport {
   std::vector<std::string> warnings;   // topology warnings and invalid probes
   std::vector<int32_t> invalidProbes;  // back-face ratio > invalidBackfaceRatio
   int32_t filledProbes = 0;            // invalid probes given their neighbours' SH
-  int32_t deringedProbes = 0;          // probes whose SH was windowed
+  int32_t deringedProbes = 0;          // probes whose SH the deringing fit changed
   uint64_t rays = 0;                   // rays traced by the integrator (all threads)
   IntegratorSettings integrator;       // as resolved from the scene and the settings
   LightModePlan lightModes;            // what each light baked, shadowmask channels
@@ -125,6 +126,14 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             std::span<const vec3> positions, const ProbeBakeSettings& settings,
                             Progress* progress = nullptr, const std::atomic<bool>* cancel = nullptr,
                             ProbeBakeReport* report = nullptr);
+
+// The bake's deringing step (ProbeBakeSettings::dering), exposed so that a raw bake can be
+// compared with the default one: every SH whose irradiance goes negative for some normal is
+// replaced by deringSh's fit (src/sh_projection.h: the nearest SH in irradiance, c0 kept,
+// whose irradiance is >= 0 for every normal); the others are untouched. Returns how many
+// changed. Each probe on its own (parallelFor over `threads`, 0 = all cores): bit-identical
+// for any thread count.
+int32_t deringProbeSh(std::span<ShL2Rgb> sh, int threads = 0);
 
 // Each probe's visibility maxDistance D for a bake at `positions`: settings.visibilityMaxDistance
 // when > 0, else per probe the distance to the farthest corner of the static objects' bounds

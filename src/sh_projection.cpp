@@ -43,27 +43,51 @@ struct Quadratic {
   }
 };
 
-// Expands E(n) = sum_i A_l c_i Y_i(n) (channel `ch`) into monomials; axes (x, y, z) = 0, 1, 2.
-Quadratic irradianceQuadratic(const ShL2Rgb& sh, int ch) {
-  double s[kShL2Count];
-  for (int i = 0; i < kShL2Count; ++i) s[i] = sh.c[i][ch];
+// Expands E(n) = sum_i e_i Y_i(n), e the irradiance coefficients (A_l c_i), into monomials;
+// axes (x, y, z) = 0, 1, 2.
+Quadratic quadraticOf(const double e[kShL2Count]) {
   Quadratic q{};
-  const double a8 = kA[2] * kY22 * s[8];
-  const double a6 = kA[2] * kY20 * s[6];
-  const double hxy = 0.5 * kA[2] * kY2xy * s[4];
-  const double hyz = 0.5 * kA[2] * kY2xy * s[5];
-  const double hxz = 0.5 * kA[2] * kY2xy * s[7];
+  const double a8 = kY22 * e[8];
+  const double a6 = kY20 * e[6];
+  const double hxy = 0.5 * kY2xy * e[4];
+  const double hyz = 0.5 * kY2xy * e[5];
+  const double hxz = 0.5 * kY2xy * e[7];
   q.m[0][0] = a8;
   q.m[1][1] = -a8;
   q.m[2][2] = 3.0 * a6;
   q.m[0][1] = q.m[1][0] = hxy;
   q.m[1][2] = q.m[2][1] = hyz;
   q.m[0][2] = q.m[2][0] = hxz;
-  q.b[0] = kA[1] * kY1 * s[3];
-  q.b[1] = kA[1] * kY1 * s[1];
-  q.b[2] = kA[1] * kY1 * s[2];
-  q.c = kA[0] * kY00 * s[0] - a6;
+  q.b[0] = kY1 * e[3];
+  q.b[1] = kY1 * e[1];
+  q.b[2] = kY1 * e[2];
+  q.c = kY00 * e[0] - a6;
   return q;
+}
+
+// The irradiance coefficients e_i = A_l c_i of channel `ch`, in double.
+std::array<double, kShL2Count> irradianceCoefficients(const ShL2Rgb& sh, int ch) {
+  std::array<double, kShL2Count> e;
+  for (int i = 0; i < kShL2Count; ++i) e[i] = kA[shBand(i)] * double(sh.c[i][ch]);
+  return e;
+}
+
+Quadratic irradianceQuadratic(const ShL2Rgb& sh, int ch) {
+  return quadraticOf(irradianceCoefficients(sh, ch).data());
+}
+
+// The basis (sh.h's order and constants) in double.
+std::array<double, kShL2Count> basisL2(const double n[3]) {
+  const double x = n[0], y = n[1], z = n[2];
+  return {kY00,
+          kY1 * y,
+          kY1 * z,
+          kY1 * x,
+          kY2xy * x * y,
+          kY2xy * y * z,
+          kY20 * (3.0 * z * z - 1.0),
+          kY2xy * x * z,
+          kY22 * (x * x - y * y)};
 }
 
 // Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations (Golub & Van
@@ -195,6 +219,188 @@ double minOnSphere(const Quadratic& q, double argmin[3]) {
     }
   }
   return best;
+}
+
+// ---- Deringing fit: a least-distance program solved by NNLS ------------------------------------
+
+// Rows of the fit's NNLS matrix: the 8 coefficients of bands 1-2 and the constraint bound.
+constexpr int kFitRows = kShL2Count;
+using FitColumn = std::array<double, kFitRows>;
+
+// Least squares min |sum_{j in passive} a[j] s_j - b| by Householder QR of the (at most
+// kFitRows) passive columns. Returns false when they are numerically dependent.
+bool passiveLeastSquares(const std::vector<FitColumn>& a, const std::vector<int>& passive,
+                         const FitColumn& b, std::vector<double>& s) {
+  const int k = int(passive.size());
+  if (k > kFitRows) return false;
+  double m[kFitRows][kFitRows];  // m[row][col]
+  double r[kFitRows];
+  double diag[kFitRows];
+  for (int i = 0; i < kFitRows; ++i) {
+    r[i] = b[size_t(i)];
+    for (int j = 0; j < k; ++j) m[i][j] = a[size_t(passive[size_t(j)])][size_t(i)];
+  }
+  for (int j = 0; j < k; ++j) {
+    double norm2 = 0.0, colScale = 0.0;
+    for (int i = 0; i < kFitRows; ++i) colScale = std::max(colScale, std::abs(m[i][j]));
+    for (int i = j; i < kFitRows; ++i) norm2 += m[i][j] * m[i][j];
+    const double norm = std::sqrt(norm2);
+    if (!(norm > 1e-12 * std::max(colScale, 1e-300))) return false;
+    const double alpha = m[j][j] > 0.0 ? -norm : norm;
+    // Householder vector v = x - alpha e_j (stored in column j, rows j..), |v|^2 = 2 norm^2 -
+    // 2 alpha x_j.
+    m[j][j] -= alpha;
+    const double v2 = 2.0 * (norm2 - alpha * (m[j][j] + alpha));
+    diag[j] = alpha;
+    if (!(v2 > 0.0)) continue;  // already e_j-aligned
+    for (int c = j + 1; c < k; ++c) {
+      double d = 0.0;
+      for (int i = j; i < kFitRows; ++i) d += m[i][j] * m[i][c];
+      const double f = 2.0 * d / v2;
+      for (int i = j; i < kFitRows; ++i) m[i][c] -= f * m[i][j];
+    }
+    double d = 0.0;
+    for (int i = j; i < kFitRows; ++i) d += m[i][j] * r[i];
+    const double f = 2.0 * d / v2;
+    for (int i = j; i < kFitRows; ++i) r[i] -= f * m[i][j];
+  }
+  s.assign(size_t(k), 0.0);
+  for (int j = k - 1; j >= 0; --j) {
+    double v = r[j];
+    for (int c = j + 1; c < k; ++c) v -= m[j][c] * s[size_t(c)];
+    s[size_t(j)] = v / diag[j];
+  }
+  return true;
+}
+
+// Non-negative least squares min |A v - b|, v >= 0, with A's columns `a` (Lawson & Hanson
+// 1974, ch. 23, algorithm NNLS). Returns v. Deterministic (ties go to the lowest index).
+std::vector<double> nnls(const std::vector<FitColumn>& a, const FitColumn& b) {
+  const size_t m = a.size();
+  std::vector<double> v(m, 0.0), s;
+  std::vector<char> passiveFlag(m, 0), rejected(m, 0);
+  std::vector<int> passive;
+  FitColumn residual = b;
+  auto updateResidual = [&] {
+    residual = b;
+    for (size_t j = 0; j < m; ++j)
+      if (v[j] != 0.0)
+        for (int i = 0; i < kFitRows; ++i) residual[size_t(i)] -= a[j][size_t(i)] * v[j];
+  };
+  constexpr double kTolerance = 1e-12;  // the caller scales A and b to O(1)
+  for (size_t outer = 0; outer < 3 * m + 30; ++outer) {
+    // The most promising column: the largest gradient component w_j = a_j . residual.
+    int t = -1;
+    double best = kTolerance;
+    for (size_t j = 0; j < m; ++j) {
+      if (passiveFlag[j] || rejected[j]) continue;
+      double w = 0.0;
+      for (int i = 0; i < kFitRows; ++i) w += a[j][size_t(i)] * residual[size_t(i)];
+      if (w > best) best = w, t = int(j);
+    }
+    if (t < 0) break;
+    passive.push_back(t);
+    passiveFlag[size_t(t)] = 1;
+    bool accepted = false;
+    for (int inner = 0; inner < 3 * kFitRows && !passive.empty(); ++inner) {
+      if (!passiveLeastSquares(a, passive, b, s)) break;
+      bool positive = true;
+      for (double x : s) positive = positive && x > 0.0;
+      if (positive) {
+        for (size_t p = 0; p < passive.size(); ++p) v[size_t(passive[p])] = s[p];
+        accepted = true;
+        break;
+      }
+      // Step from v toward s as far as v stays >= 0, and drop the columns that reach 0 (the
+      // one that limits the step always).
+      double alpha = 1.0;
+      size_t limiting = 0;
+      for (size_t p = 0; p < passive.size(); ++p) {
+        if (s[p] > 0.0) continue;
+        const double vp = v[size_t(passive[p])];
+        const double ap = vp - s[p] > 0.0 ? vp / (vp - s[p]) : 0.0;
+        if (ap < alpha) alpha = ap, limiting = p;
+      }
+      std::vector<int> kept;
+      for (size_t p = 0; p < passive.size(); ++p) {
+        double& vp = v[size_t(passive[p])];
+        vp += alpha * (s[p] - vp);
+        if (p != limiting && vp > 0.0) {
+          kept.push_back(passive[p]);
+        } else {
+          vp = 0.0;
+          passiveFlag[size_t(passive[p])] = 0;
+        }
+      }
+      passive = std::move(kept);
+    }
+    if (!accepted || !passiveFlag[size_t(t)]) {
+      // The new column did not stay (dependent on the others, or rounding made its
+      // coefficient <= 0): drop it for good, so that the loop terminates. v stays >= 0.
+      if (passiveFlag[size_t(t)]) {
+        passiveFlag[size_t(t)] = 0;
+        v[size_t(t)] = 0.0;
+        passive.erase(std::find(passive.begin(), passive.end(), t));
+      }
+      rejected[size_t(t)] = 1;
+    }
+    updateResidual();
+  }
+  return v;
+}
+
+// The deringing fit of one channel, in units of the channel's mean irradiance (so that
+// every number is O(1)): z = e_1..8 / mean, where E(n) / mean = 1 + sum_{i>=1} z_i Y_i(n).
+// Minimises sum_i (z_i - raw_i)^2 subject to E(n) / mean >= margin for every normal, by
+// cutting planes (see deringSh in the header). Returns the fitted z (index 0 unused).
+std::array<double, kShL2Count> fitNonNegative(const std::array<double, kShL2Count>& raw,
+                                              double margin) {
+  constexpr int kSeedNormals = 256;
+  constexpr int kMaxCuts = 32;
+  static const std::vector<vec3> seeds = fibonacciSphere(kSeedNormals);
+  // In u = z - raw the program is a least-distance one, min |u| s.t. G u >= h, with G_k =
+  // Y_1..8(n_k) and h_k = margin - E_raw(n_k) / mean. Lawson & Hanson's LDP: NNLS on the
+  // columns (G_k, h_k) against b = (0, ..., 0, 1); with r = A v - b, u = -r_1..8 / r_9.
+  std::vector<FitColumn> columns;
+  auto addConstraint = [&](const double n[3]) {
+    const auto y = basisL2(n);
+    FitColumn col;
+    double eRaw = 1.0;
+    for (int i = 1; i < kShL2Count; ++i) {
+      col[size_t(i - 1)] = y[size_t(i)];
+      eRaw += raw[size_t(i)] * y[size_t(i)];
+    }
+    col[kFitRows - 1] = margin - eRaw;
+    columns.push_back(col);
+  };
+  for (const vec3& d : seeds) {
+    const double n[3] = {d.x, d.y, d.z};
+    addConstraint(n);
+  }
+  FitColumn b{};
+  b[kFitRows - 1] = 1.0;
+
+  std::array<double, kShL2Count> z = raw;
+  for (int cut = 0; cut <= kMaxCuts; ++cut) {
+    const std::vector<double> v = nnls(columns, b);
+    FitColumn r{};
+    for (size_t j = 0; j < columns.size(); ++j)
+      for (int i = 0; i < kFitRows; ++i) r[size_t(i)] += columns[j][size_t(i)] * v[j];
+    for (int i = 0; i < kFitRows; ++i) r[size_t(i)] -= b[size_t(i)];
+    // r_9 = h.v - 1 < 0 whenever the program is feasible (z = 0, the mean alone, always is).
+    if (!(r[kFitRows - 1] < 0.0)) break;
+    for (int i = 1; i < kShL2Count; ++i)
+      z[size_t(i)] = raw[size_t(i)] - r[size_t(i - 1)] / r[kFitRows - 1];
+    // The exact minimum of the fit over the sphere: done when it is >= 0 (the margin is what
+    // the cuts may still miss by), else it becomes a new constraint.
+    double e[kShL2Count];
+    e[0] = 1.0 / kY00;
+    for (int i = 1; i < kShL2Count; ++i) e[i] = z[size_t(i)];
+    double n[3] = {0.0, 1.0, 0.0};
+    if (minOnSphere(quadraticOf(e), n) >= 0.0) break;
+    addConstraint(n);
+  }
+  return z;
 }
 
 }  // namespace
@@ -348,16 +554,75 @@ vec3 minIrradiance(const ShL2Rgb& sh, std::array<vec3, 3>* argmin) {
   return result;
 }
 
-DeringResult deringSh(const ShL2Rgb& sh, ShWindowKind kind, float relTolerance) {
+std::vector<vec3> fibonacciSphere(int n) {
+  std::vector<vec3> out;
+  out.reserve(size_t(std::max(n, 0)));
+  const double golden = kPiD * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / n;
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const double phi = golden * i;
+    out.push_back(vec3(float(r * std::cos(phi)), float(r * std::sin(phi)), float(z)));
+  }
+  return out;
+}
+
+namespace {
+float minOf(vec3 v) { return std::min(v.x, std::min(v.y, v.z)); }
+}  // namespace
+
+DeringResult deringSh(const ShL2Rgb& sh) {
   DeringResult r;
+  r.sh = sh;
+  r.minIrradianceBefore = minIrradiance(sh);
+  r.minIrradianceAfter = r.minIrradianceBefore;
+  if (minOf(r.minIrradianceBefore) >= 0.0f) return r;  // already fine: untouched
+  r.changed = true;
+
+  // The target minimum, relative to the mean irradiance: far below any accuracy that
+  // matters, far above float rounding of the coefficients.
+  constexpr double kMargin = 1e-4;
+  for (int ch = 0; ch < 3; ++ch) {
+    if (r.minIrradianceBefore[ch] >= 0.0f) continue;  // this channel is fine as it is
+    const std::array<double, kShL2Count> e = irradianceCoefficients(sh, ch);
+    const double mean = kY00 * e[0];  // the irradiance of band 0 alone, pi Y00 c0
+    if (!(mean > 0.0)) {
+      // A negative mean radiance: nothing with the same c0 is >= 0. Keep band 0 alone.
+      r.ok = false;
+      for (int i = 1; i < kShL2Count; ++i) r.sh.c[i][ch] = 0.0f;
+      continue;
+    }
+    std::array<double, kShL2Count> raw;
+    for (int i = 0; i < kShL2Count; ++i) raw[size_t(i)] = e[size_t(i)] / mean;
+    const std::array<double, kShL2Count> z = fitNonNegative(raw, kMargin);
+    for (int i = 1; i < kShL2Count; ++i) r.sh.c[i][ch] = float(z[size_t(i)] * mean / kA[shBand(i)]);
+  }
+  // The guarantee: should the cuts have stopped short, or float rounding of the coefficients
+  // have dipped below 0, scale bands 1-2 of that channel toward the mean. E_t = m0 + t (E -
+  // m0) with m0 = pi Y00 c0 has minimum m0 + t (min E - m0), which t = m0 / (m0 - min E)
+  // brings to 0; shrink t a little until the exact minimum of the float SH is >= 0.
+  r.minIrradianceAfter = minIrradiance(r.sh);
+  for (int ch = 0; ch < 3; ++ch) {
+    const double m0 = kA[0] * kY00 * double(r.sh.c[0][ch]);
+    for (int attempt = 0; attempt < 8 && r.minIrradianceAfter[ch] < 0.0f && m0 > 0.0; ++attempt) {
+      const double t = m0 / (m0 - double(r.minIrradianceAfter[ch])) * (1.0 - 1e-5 * (1 << attempt));
+      for (int i = 1; i < kShL2Count; ++i) r.sh.c[i][ch] = float(double(r.sh.c[i][ch]) * t);
+      r.minIrradianceAfter = minIrradiance(r.sh);
+      r.fallback = true;
+    }
+  }
+  return r;
+}
+
+WindowDeringResult windowDeringSh(const ShL2Rgb& sh, ShWindowKind kind, float relTolerance) {
+  WindowDeringResult r;
   r.sh = sh;
   r.width = kInfinity;
   r.minIrradianceBefore = minIrradiance(sh);
   r.minIrradianceAfter = r.minIrradianceBefore;
-  auto minOf = [](vec3 v) { return std::min(v.x, std::min(v.y, v.z)); };
   if (minOf(r.minIrradianceBefore) >= 0.0f) return r;  // already fine: untouched
 
-  r.windowed = true;
+  r.changed = true;
   auto minAt = [&](float width) { return minOf(minIrradiance(windowSh(sh, kind, width))); };
   // Width 1 keeps band 0 only, whose irradiance pi Y00 c0 is constant: feasible unless the
   // mean radiance itself is negative, which no window can fix.

@@ -1,13 +1,15 @@
 // sh_projection.h: bake-time spherical-harmonics tools on top of sh.h: projection (from an
 // equirectangular map, from a function, from weighted samples), conversion to irradiance SH,
-// L1 reduction, windowing / deringing, and Unity's 7-vector packing.
+// L1 reduction, windowing, deringing (a constrained least-squares fit, or the older window),
+// and Unity's 7-vector packing.
 //
 // Which quantity each function takes and returns (basis and order: sh.h, MISSION.md):
 //   - projectEquirect / projectFunction / ShL2Accumulator: RADIANCE SH, c_i = int L Y_i dw.
 //   - ShL2Rgb::irradiance(n) (sh.h): irradiance E(n) in W/m^2 (lux in kiln's units), NOT E/pi.
 //   - toIrradianceSh: SH of E(n) itself (bands scaled by A_l); its evaluate(n) is E(n).
 //   - minIrradiance: per-channel minimum over the sphere of E(n) (not E/pi).
-//   - windowSh / deringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing" below).
+//   - windowSh / windowDeringSh / deringSh: RADIANCE SH in, RADIANCE SH out (see "Windowing"
+//     and "Deringing" below).
 //   - packUnitySh9 / evalUnitySh9: E(n) / pi, the outgoing radiance of a white Lambertian
 //     surface, which is what Unity's ambient / probe SH constants evaluate to (and what a
 //     kiln lightmap texel stores).
@@ -16,6 +18,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "src/image.h"
 #include "src/math.h"
@@ -96,6 +99,8 @@ ShL1Rgb reduceToL1(const ShL2Rgb& sh);
 // irradiance E0 along s, E(n) = E0 (1/4 + t/2 + 5/32 (3t^2 - 1)), t = n.s, has a minimum
 // of -0.0396 E0 at t = -8/15). Tapering the higher bands removes the ringing at the cost of
 // some blur (Sloan 2008 "Stupid SH Tricks"; Sloan 2017 "Deringing Spherical Harmonics").
+// The bake's deringing (deringSh below) does not window: it moves bands 1-2 only as far as
+// E >= 0 needs, which costs far less accuracy (docs/probes.md, "Deringing").
 
 enum class ShWindowKind {
   // Filament cmgen's window: (sin(x) / x)^4, x = pi l / width (the sinc applied 4 times);
@@ -128,14 +133,58 @@ inline ShL2Rgb windowSh(const ShL2Rgb& sh, ShWindowKind kind, float width) {
 // minimising normals are written to *argmin when given.
 vec3 minIrradiance(const ShL2Rgb& sh, std::array<vec3, 3>* argmin = nullptr);
 
+// `n` unit vectors spread evenly over the sphere (Fibonacci lattice, golden-angle spiral):
+// equal-area, so plain averages over them approximate averages over the sphere, and a dense
+// set samples every region. Deterministic.
+std::vector<vec3> fibonacciSphere(int n);
+
 struct DeringResult {
-  ShL2Rgb sh;            // windowed radiance SH (== input when nothing was needed)
-  bool windowed = false;  // false: the input's irradiance was already >= 0 everywhere
-  float width = 0.0f;    // window width used (infinite when not windowed)
-  std::array<float, 3> factors{1.0f, 1.0f, 1.0f};
+  ShL2Rgb sh;            // radiance SH (== input when nothing was needed)
+  bool changed = false;  // false: the input's irradiance was already >= 0 everywhere
   vec3 minIrradianceBefore{0.0f};
   vec3 minIrradianceAfter{0.0f};
   bool ok = true;  // false: even band 0 alone is negative (negative mean radiance)
+  // deringSh only: the fit's cutting planes stopped short of E >= 0 and bands 1-2 of some
+  // channel were scaled toward the mean to finish (see deringSh).
+  bool fallback = false;
+};
+
+// Deringing by the nearest non-negative irradiance: per channel, the radiance SH whose
+// irradiance is >= 0 for every normal and that is nearest to `sh` in irradiance, with c0 (the
+// mean radiance, hence the energy) kept exactly. SH whose irradiance is already >= 0
+// everywhere are returned bit-for-bit unchanged.
+//
+// Nearest in irradiance: the L2 distance over the sphere between the fitted and the raw
+// irradiance E(n), in the orthonormal basis sum_i (A_l (c_i - raw_i))^2. The raw L2
+// projection is the best band-limited approximation of the true irradiance, so by
+// Pythagoras this also minimises the L2 distance to the TRUE irradiance among non-negative
+// L2 irradiances. (The distance between radiance coefficients, sum_i (c_i - raw_i)^2, moves
+// band 2 more since A2 = pi / 4 makes it cheap, and was measurably worse at the Cycles
+// reference points: docs/probes.md, "Deringing".)
+//
+// Why not a window: a window scales a whole band by one factor, so the light on the bright
+// side is blurred as much as the ringing on the dark side needs (at a Cornell box point near
+// the lamp, normal +x, the window gave 1.9x the exact irradiance, raw L2 1.2x, the fit 1.2x:
+// docs/probes.md). The fit moves the 8 coefficients of bands 1-2 freely, only as far as the
+// constraint needs.
+//
+// Method: the irradiance E(n) = sum_i A_l c_i Y_i(n) is linear in the coefficients, so this is
+// a least-distance problem with one linear constraint per normal (a semi-infinite quadratic
+// program in 8 unknowns). It is solved by cutting planes: constraints at 256 Fibonacci
+// normals, solved exactly as a least-distance program through NNLS (Lawson & Hanson 1974,
+// "Solving Least Squares Problems", ch. 23); then the exact minimum of the fitted
+// irradiance over the sphere (minIrradiance's trust-region solve) is added as a new
+// constraint while it is negative. The constraints ask for E >= 1e-4 x the mean irradiance,
+// so that float rounding cannot take the result below 0. The result is checked with the
+// exact minimum; should the cuts not have converged (not seen in practice), the bands 1-2 are
+// scaled toward the mean until E >= 0 (a window of equal factors, always feasible). Pure
+// arithmetic on the input: deterministic (bit-identical on any thread), ~0.2 ms per SH that
+// needs it (random SH, 3 channels, one core), about as long as windowDeringSh's bisection.
+DeringResult deringSh(const ShL2Rgb& sh);
+
+struct WindowDeringResult : DeringResult {
+  float width = 0.0f;  // window width used (infinite when not windowed)
+  std::array<float, 3> factors{1.0f, 1.0f, 1.0f};
 };
 
 // The weakest window of `kind` (largest width, one width for all three channels so the hue
@@ -144,9 +193,10 @@ struct DeringResult {
 // is tested while the width is bisected between 1 (band 0 only: irradiance = pi c0 Y00 >= 0)
 // and the largest width that is still negative. An SH whose irradiance is already >= 0 is
 // returned bit-for-bit unchanged. The search stops when the width is known within
-// `relTolerance` (relative).
-DeringResult deringSh(const ShL2Rgb& sh, ShWindowKind kind = ShWindowKind::kSinc4,
-                      float relTolerance = 1e-4f);
+// `relTolerance` (relative). kiln's bake used this before deringSh's fit; it is kept to
+// compare against (docs/charts.md, chart 3).
+WindowDeringResult windowDeringSh(const ShL2Rgb& sh, ShWindowKind kind = ShWindowKind::kSinc4,
+                                  float relTolerance = 1e-4f);
 
 // ---------------------------------------------------------------------------------------------
 // Unity SH9 packing

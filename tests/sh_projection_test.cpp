@@ -1,5 +1,6 @@
 // sh_projection_test.cpp: SH projection, irradiance, L1, windowing / deringing and Unity
-// packing, against identities and closed-form integrals, and against brute-force cosine
+// packing, against identities and closed-form integrals (the deringing fit against the
+// projection property and a 2D search), and against brute-force cosine
 // integration for the shared HDR environment maps.
 #include "src/sh_projection.h"
 
@@ -17,20 +18,6 @@
 
 namespace kiln {
 namespace {
-
-// n points spread evenly over the sphere (Fibonacci / golden-angle spiral).
-std::vector<vec3> fibonacciSphere(int n) {
-  std::vector<vec3> pts;
-  pts.reserve(n);
-  const double golden = 3.14159265358979323846 * (3.0 - std::sqrt(5.0));
-  for (int i = 0; i < n; ++i) {
-    double y = 1.0 - 2.0 * (i + 0.5) / n;
-    double r = std::sqrt(std::max(0.0, 1.0 - y * y));
-    double phi = golden * i;
-    pts.push_back(vec3(float(r * std::cos(phi)), float(y), float(r * std::sin(phi))));
-  }
-  return pts;
-}
 
 ShL2Rgb randomSh(std::mt19937& rng, float dc = 1.0f) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -296,9 +283,9 @@ TEST(ShProjection, DeringingFindsTheWeakestNonNegativeWindow) {
   ASSERT_LT(minComponent(minIrradiance(sh)), 0.0f);
   ASSERT_LT(denseMinIrradiance(sh), 0.0f);
   for (auto kind : {ShWindowKind::kSinc4, ShWindowKind::kLanczos, ShWindowKind::kHanning}) {
-    DeringResult r = deringSh(sh, kind, 1e-4f);
+    WindowDeringResult r = windowDeringSh(sh, kind, 1e-4f);
     ASSERT_TRUE(r.ok);
-    EXPECT_TRUE(r.windowed);
+    EXPECT_TRUE(r.changed);
     EXPECT_GT(r.width, 1.0f);
     EXPECT_LT(r.width, 100.0f);
     EXPECT_GE(minComponent(r.minIrradianceAfter), 0.0f);
@@ -318,9 +305,183 @@ TEST(ShProjection, DeringingFindsTheWeakestNonNegativeWindow) {
   ShL2Rgb fine;
   fine.c[0] = vec3(1.0f);
   fine.c[1] = vec3(0.3f);
-  DeringResult r = deringSh(fine);
-  EXPECT_FALSE(r.windowed);
+  WindowDeringResult r = windowDeringSh(fine);
+  EXPECT_FALSE(r.changed);
   for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i], fine.c[i]);
+}
+
+// The squared L2 distance over the sphere between the irradiances of two radiance SH, per
+// channel: sum_i (A_l (a_i - b_i))^2 (orthonormal basis), the norm deringSh minimises.
+vec3 irradianceDistance2(const ShL2Rgb& a, const ShL2Rgb& b) {
+  vec3 d(0.0f);
+  for (int i = 0; i < kShL2Count; ++i) {
+    const vec3 e = (a.c[i] - b.c[i]) * kShCosineLobe[shBand(i)];
+    d += e * e;
+  }
+  return d;
+}
+
+// Per channel, <x - raw, y - x> in the irradiance inner product (as above).
+vec3 irradianceDot(const ShL2Rgb& raw, const ShL2Rgb& x, const ShL2Rgb& y) {
+  glm::dvec3 d(0.0);
+  for (int i = 0; i < kShL2Count; ++i) {
+    const double a2 = double(kShCosineLobe[shBand(i)]) * kShCosineLobe[shBand(i)];
+    d += glm::dvec3(x.c[i] - raw.c[i]) * glm::dvec3(y.c[i] - x.c[i]) * a2;
+  }
+  return vec3(d);
+}
+
+// A bright small spot (a directional light) over a dim ambient: the truncated cosine lobe
+// rings negative on the far side (E0 (1/4 + t/2 + 5/32 (3t^2-1)) bottoms out at -19/480 E0).
+ShL2Rgb spotOverAmbient(vec3 s, vec3 spot, float ambient) {
+  ShL2Rgb sh;
+  sh.addSample(s, spot, 1.0f);
+  sh.c[0] += vec3(ambient) * (2.0f * std::sqrt(kPi));
+  return sh;
+}
+
+// deringSh is the projection of the raw irradiance onto the convex set of non-negative L2
+// irradiances with the same c0. A point x of a convex set C is the projection of raw onto C
+// exactly when <x - raw, y - x> >= 0 for every y in C (the variational inequality of
+// projections). Every window of the raw SH with w0 = 1 that is >= 0 is such a y, and so is
+// the fit of any other SH with the same c0 moved toward it; the test checks them all, and
+// that the result is >= 0 over the sphere, keeps c0 bit-for-bit and sits at the boundary.
+TEST(ShProjection, DeringFitIsTheNearestNonNegativeIrradiance) {
+  std::vector<ShL2Rgb> cases = {
+      spotOverAmbient(glm::normalize(vec3(-0.2f, 0.9f, 0.4f)), vec3(10.0f, 6.0f, 3.0f), 0.02f),
+      spotOverAmbient(vec3(1.0f, 0.0f, 0.0f), vec3(1.0f), 0.0f),  // zonal, touches on a circle
+  };
+  std::mt19937 rng(7);
+  while (cases.size() < 200) {
+    ShL2Rgb sh = randomSh(rng, 1.0f);
+    if (minComponent(minIrradiance(sh)) < 0.0f) cases.push_back(sh);
+  }
+  int fallbacks = 0;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const ShL2Rgb& raw = cases[k];
+    ASSERT_LT(minComponent(minIrradiance(raw)), 0.0f) << k;
+    const DeringResult r = deringSh(raw);
+    ASSERT_TRUE(r.ok) << k;
+    EXPECT_TRUE(r.changed) << k;
+    fallbacks += r.fallback;
+    EXPECT_EQ(r.sh.c[0], raw.c[0]) << k;
+    const vec3 minAfter = minIrradiance(r.sh);
+    EXPECT_EQ(minAfter, r.minIrradianceAfter) << k;
+    EXPECT_GE(denseMinIrradiance(r.sh, 4000), 0.0f) << k;
+    // At the boundary: the minimum of every channel that was negative is 0 up to the margin
+    // (1e-4 of the mean irradiance, pi Y00 c0), not above it; channels that were >= 0 are
+    // untouched.
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_GE(minAfter[c], 0.0f) << k;
+      const float mean = kPi * 0.282095f * raw.c[0][c];
+      if (r.minIrradianceBefore[c] < 0.0f) {
+        EXPECT_LT(minAfter[c], 2e-4f * mean) << k << " channel " << c;
+      } else {
+        for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i][c], raw.c[i][c]) << k;
+      }
+    }
+    // The variational inequality against feasible windows of the raw SH (all w0 = 1) and the
+    // window the old deringing picked: none is closer, and <x - raw, y - x> >= 0 for each.
+    // Tolerance: float coefficients (~1e-6 relative) on O(1) values, and the margin.
+    const float tol = 1e-4f * (1.0f + glm::dot(raw.c[0], raw.c[0]));
+    std::vector<ShL2Rgb> feasible = {windowDeringSh(raw).sh};
+    for (float w1 : {0.0f, 0.25f, 0.5f, 0.75f, 1.0f})
+      for (float w2 : {0.0f, 0.25f, 0.5f, 0.75f, 1.0f}) {
+        ShL2Rgb y = windowSh(raw, {1.0f, w1, w2});
+        if (minComponent(minIrradiance(y)) >= 0.0f) feasible.push_back(y);
+      }
+    const vec3 dFit = irradianceDistance2(r.sh, raw);
+    for (const ShL2Rgb& y : feasible) {
+      const vec3 dot = irradianceDot(raw, r.sh, y);
+      const vec3 dY = irradianceDistance2(y, raw);
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_GE(dot[c], -tol) << k << " channel " << c;
+        EXPECT_LE(dFit[c], dY[c] + tol) << k << " channel " << c;
+      }
+    }
+  }
+  // The cutting planes converge by themselves (the scaling fallback is a guarantee only).
+  EXPECT_EQ(fallbacks, 0);
+}
+
+// The zonal case, against a 2D search: a directional light of irradiance 1 along s gives
+// E(t) = 1/4 + t/2 + 5/32 (3t^2 - 1), t = n.s. The problem is symmetric about s and its
+// solution unique, so the fit is zonal too: E(t) = 1/4 + p1 t + p2 (3t^2 - 1) (c0 kept).
+// 1, t and 3t^2 - 1 are orthogonal over the sphere with squared norms 4pi, 4pi/3 and
+// 16pi/5, so the fit minimises 4pi/3 (p1 - 1/2)^2 + 16pi/5 (p2 - 5/32)^2 subject to
+// E(t) >= 0 on [-1, 1]: a grid over (p1, p2) brackets the optimum.
+TEST(ShProjection, DeringFitOfADirectionalLightMatchesA2dSearch) {
+  constexpr double kPiD = 3.14159265358979323846;
+  const vec3 s = glm::normalize(vec3(0.3f, -0.5f, 0.8f));
+  const ShL2Rgb raw = spotOverAmbient(s, vec3(1.0f), 0.0f);
+  const DeringResult r = deringSh(raw);
+  // (p0, p1, p2) of a zonal SH from E at t = -1, 0, 1: E(+-1) = p0 +- p1 + 2 p2, E(0) =
+  // p0 - p2.
+  const vec3 u = glm::normalize(glm::cross(s, vec3(0, 0, 1)));
+  auto zonal = [&](const ShL2Rgb& sh) {
+    const double em = sh.irradiance(-s).x, e0 = sh.irradiance(u).x, ep = sh.irradiance(s).x;
+    const double p2 = (0.5 * (ep + em) - e0) / 3.0;
+    return glm::dvec3(e0 + p2, 0.5 * (ep - em), p2);
+  };
+  const glm::dvec3 pr = zonal(raw), pf = zonal(r.sh);
+  EXPECT_NEAR(pr.x, 0.25, 1e-5);
+  EXPECT_NEAR(pr.y, 0.5, 1e-5);
+  EXPECT_NEAR(pr.z, 5.0 / 32.0, 1e-5);
+  EXPECT_EQ(r.sh.c[0], raw.c[0]);  // c0 kept
+  // The fit is zonal, up to the cutting planes' tolerance (the margin, 1e-4 of the mean).
+  for (vec3 n : fibonacciSphere(200)) {
+    const float t = glm::dot(n, s);
+    const double p = pf.x + pf.y * t + pf.z * (3.0 * t * t - 1.0);
+    EXPECT_NEAR(r.sh.irradiance(n).x, p, 2e-4) << t;
+  }
+  auto feasible = [](double p1, double p2) {  // min of 1/4 - p2 + p1 t + 3 p2 t^2 on [-1, 1]
+    auto q = [&](double t) { return 0.25 + p1 * t + p2 * (3.0 * t * t - 1.0); };
+    double m = std::min(q(-1.0), q(1.0));
+    if (p2 > 0.0 && std::abs(p1 / (6.0 * p2)) < 1.0) m = std::min(m, q(-p1 / (6.0 * p2)));
+    return m >= 0.0;
+  };
+  auto dist = [&](double p1, double p2) {
+    return 4.0 * kPiD / 3.0 * (p1 - 0.5) * (p1 - 0.5) +
+           16.0 * kPiD / 5.0 * (p2 - 5.0 / 32.0) * (p2 - 5.0 / 32.0);
+  };
+  double best = 1e9, b1 = 0, b2 = 0;
+  for (int i = 0; i <= 1000; ++i)
+    for (int j = 0; j <= 1000; ++j) {
+      const double p1 = 0.5 * i / 1000.0, p2 = 5.0 / 32.0 * j / 1000.0;
+      if (dist(p1, p2) < best && feasible(p1, p2)) best = dist(p1, p2), b1 = p1, b2 = p2;
+    }
+  EXPECT_LE(dist(pf.y, pf.z), best * (1.0 + 1e-3));
+  EXPECT_NEAR(pf.y, b1, 2e-3);
+  EXPECT_NEAR(pf.z, b2, 2e-3);
+  // The window deringing, for comparison, moves further: both bands scaled.
+  const glm::dvec3 pw = zonal(windowDeringSh(raw).sh);
+  EXPECT_GT(dist(pw.y, pw.z), 10.0 * dist(pf.y, pf.z));
+  std::printf(
+      "directional light: raw E(t) = 0.25 + 0.5 t + 0.15625 (3t^2-1); fit %.5f t + "
+      "%.5f (3t^2-1) (grid %.4f, %.4f); window %.5f t + %.5f (3t^2-1); distance fit "
+      "%.4g window %.4g\n",
+      pf.y, pf.z, b1, b2, pw.y, pw.z, dist(pf.y, pf.z), dist(pw.y, pw.z));
+}
+
+// Only the channels and SH that need it change; the result is a pure function of the input.
+TEST(ShProjection, DeringFitLeavesNonNegativeInputAlone) {
+  ShL2Rgb fine;
+  fine.c[0] = vec3(1.0f);
+  fine.c[1] = vec3(0.3f);
+  const DeringResult r = deringSh(fine);
+  EXPECT_FALSE(r.changed);
+  for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i], fine.c[i]);
+  // Negative mean radiance: no SH with that c0 is >= 0; band 0 alone is returned, not ok.
+  ShL2Rgb negative = fine;
+  negative.c[0] = vec3(-1.0f, 1.0f, 1.0f);
+  const DeringResult n = deringSh(negative);
+  EXPECT_FALSE(n.ok);
+  EXPECT_EQ(n.sh.c[0], negative.c[0]);
+  for (int i = 1; i < kShL2Count; ++i) EXPECT_EQ(n.sh.c[i].x, 0.0f);
+  // Repeatable bit for bit.
+  const ShL2Rgb spot = spotOverAmbient(glm::normalize(vec3(1, 2, 3)), vec3(4, 2, 1), 0.01f);
+  const DeringResult a = deringSh(spot), b = deringSh(spot);
+  for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(a.sh.c[i], b.sh.c[i]);
 }
 
 // Brute-force irradiance of an equirectangular map: sum over pixels of L max(0, n.d) dOmega.
@@ -389,12 +550,12 @@ void checkEnvMap(const std::string& name) {
   // Deringing: never negative over a dense sampling; untouched when it already was not.
   DeringResult r = deringSh(sh);
   EXPECT_GE(denseMinIrradiance(r.sh), 0.0f);
-  if (!r.windowed) {
+  if (!r.changed) {
     EXPECT_GE(minComponent(r.minIrradianceBefore), 0.0f);
     for (int i = 0; i < kShL2Count; ++i) EXPECT_EQ(r.sh.c[i], sh.c[i]);
   }
-  std::printf("%s: min irradiance %.4g, windowed %d\n", name.c_str(),
-              minComponent(r.minIrradianceBefore), int(r.windowed));
+  std::printf("%s: min irradiance %.4g, deringed %d\n", name.c_str(),
+              minComponent(r.minIrradianceBefore), int(r.changed));
 }
 
 TEST(ShProjection, EnvMapUffizi) { checkEnvMap("uffizi"); }

@@ -4,7 +4,8 @@
 //   1. lightmapSamplesChart: lightmap samples per texel vs relative error vs bake time;
 //   2. probePlacementChart: probe count vs interpolation error for automatic placement, a
 //      uniform grid and Godot-style octree corners;
-//   3. shIrradianceChart: L1 vs L2 vs windowed L2 irradiance error on HDR environment maps;
+//   3. shIrradianceChart: L1, L2 and deringed L2 (window, fit) against the exact irradiance
+//      on HDR environment maps, the same with a sun, and the Cycles Cornell box points;
 //   4. tetrahedralizationChart: TetGen vs CGAL tetrahedralization time;
 //   5. probeLookupChart: lookups per second, hinted walk / unhinted / CGAL locate / brute force;
 //   6. probeVisibilityChart: light leaking through a wall vs the size of the probes'

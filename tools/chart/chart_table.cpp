@@ -166,6 +166,15 @@ double median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
+double quantile(std::vector<double> v, double f) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double pos = std::clamp(f, 0.0, 1.0) * double(v.size() - 1);
+  const size_t i = size_t(pos);
+  const double t = pos - double(i);
+  return i + 1 < v.size() ? v[i] * (1.0 - t) + v[i + 1] * t : v[i];
+}
+
 double logLogSlope(const std::vector<double>& x, const std::vector<double>& y) {
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   int n = 0;

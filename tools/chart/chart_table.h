@@ -53,6 +53,9 @@ std::string machineDescription();
 
 // Median of the values (the mean of the two middle ones for an even count); 0 when empty.
 double median(std::vector<double> v);
+// Quantile f in [0, 1] of the values, interpolated linearly between order statistics (f = 0.5
+// is the median above); 0 when empty.
+double quantile(std::vector<double> v, double f);
 
 // Least-squares slope of log(y) against log(x) over the pairs with x, y > 0 (0 when fewer
 // than two).
