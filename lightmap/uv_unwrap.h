@@ -29,14 +29,21 @@ struct UnwrapSettings {
   // Empty texels between charts, so that bilinear filtering and dilation of one chart never
   // reach another.
   int gutterTexels = 2;
-  // A chart takes a triangle when its normal is within this angle of the chart's seed
-  // normal; small charts are then merged into neighbours while every normal of the union
-  // stays within this angle of the union's mean normal. 45 degrees: a box's faces (90
-  // degrees apart) always get charts of their own, and a 90-degree cone keeps LSCM's area
-  // distortion low (measured: max 1.13 on spheres, 18 charts for a UV sphere) while a
-  // cylinder needs 4 to 5 charts. Charts that LSCM maps with a fold or an overlap are regrown
+  // A chart grows over soft edges (not over creases, where the mesh's vertex normals are
+  // split) while every new triangle's normal is within this angle of the chart's current
+  // area-weighted mean normal; charts are then merged into neighbours while every normal of
+  // the union stays strictly within this angle of the union's mean normal. 60 degrees: a
+  // chart spans up to about 120 degrees of arc (a cylinder unrolls in 3 charts, a sphere in
+  // about 10) while LSCM's area distortion stays within kMaxAreaDistortion; a box's faces
+  // (90 degrees apart, exactly 45 from their mean) are creases and stay apart anyway.
+  // Charts that LSCM maps with a fold, an overlap or too much area distortion are regrown
   // with half the angle (down to 2 degrees, then one chart per triangle).
-  float maxChartAngleDegrees = 45.0f;
+  float maxChartAngleDegrees = 60.0f;
+  // Charts smaller than this many texels (at texelsPerUnit) are merged into a neighbour even
+  // across a crease or beyond the cone, when the union still parameterizes without a fold,
+  // an overlap or too much distortion: every chart costs a gutter on each side, which on a
+  // chart of a few texels is most of its space.
+  float smallChartTexels = 100.0f;
   // Charts whose normals all lie within this angle of their mean normal are projected onto
   // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
   float planarAngleDegrees = 1.0f;

@@ -188,9 +188,10 @@ TEST(LightmapUv, SphereHasNoFlipsNoOverlapsAndBoundedStretch) {
   EXPECT_EQ(r->stats.flippedTriangles, 0);
   EXPECT_EQ(r->stats.degenerateTriangles, 0);
   EXPECT_LT(maxOverlap(*r), 1e-12);
-  // 45-degree cones: a sphere needs more than the 6 charts of a cube, but not per-triangle.
-  EXPECT_GE(r->stats.chartCount, 6);
-  EXPECT_LE(r->stats.chartCount, 40);
+  // 60-degree cones around each chart's mean normal: a chart spans up to about 120 degrees
+  // of arc, so a sphere needs at least 4 charts (a cube's 6 at 90 degrees) and few more.
+  EXPECT_GE(r->stats.chartCount, 4);
+  EXPECT_LE(r->stats.chartCount, 12);
   EXPECT_LT(r->stats.l2Stretch, 1.1);
   EXPECT_LT(r->stats.maxAnisotropy, 1.5);
   EXPECT_LT(r->stats.maxAreaDistortion, 2.0);
@@ -207,10 +208,10 @@ TEST(LightmapUv, CylinderIsDevelopableSoLscmIsNearIsometric) {
   ASSERT_TRUE(r.ok()) << r.error();
   EXPECT_EQ(r->stats.flippedTriangles, 0);
   EXPECT_LT(maxOverlap(*r), 1e-12);
-  // Charts of at most 90 degrees of arc (seed normal +-45 degrees): 4 would do for 24
-  // slices; greedy growth from the lowest free triangle leaves a few short charts.
-  EXPECT_GE(r->stats.chartCount, 4);
-  EXPECT_LE(r->stats.chartCount, 6);
+  // Charts of at most 120 degrees of arc (mean normal +-60 degrees): 3 for 24 slices, a
+  // fourth at most when growth leaves a short one that cannot merge.
+  EXPECT_GE(r->stats.chartCount, 3);
+  EXPECT_LE(r->stats.chartCount, 4);
   // A cylinder's facets unfold exactly: LSCM finds the isometry up to float error.
   EXPECT_NEAR(r->stats.l2Stretch, 1.0, 1e-3);
   EXPECT_LT(r->stats.maxAnisotropy, 1.01);
