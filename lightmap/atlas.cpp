@@ -1,5 +1,5 @@
-// atlas.cpp: lightmap atlas packing (texel density rule, skyline packing into power-of-two
-// pages) and its manifest form for --lock-atlas.
+// atlas.cpp: lightmap atlas packing (texel density rule, skyline packing into pages shrunk
+// to the smallest multiple-of-4 size) and its manifest form for --lock-atlas.
 #include "lightmap/atlas.h"
 
 #include <algorithm>
@@ -40,21 +40,34 @@ AreaPair areas(const Object& o) {
   return a;
 }
 
-// Candidate page sizes no larger than maxSize, smallest area first: powers of two w x w and
-// w x w/2, and maxSize x maxSize (and x its previous size) when maxSize is no power of two.
-std::vector<glm::ivec2> pageSizes(int maxSize) {
-  std::vector<int> sides;
-  for (int s = 1; s < maxSize; s *= 2) sides.push_back(s);
-  sides.push_back(maxSize);
-  std::vector<glm::ivec2> sizes;
-  for (size_t i = 0; i < sides.size(); ++i) {
-    if (i > 0) sizes.push_back(glm::ivec2(sides[i], sides[i - 1]));
-    sizes.push_back(glm::ivec2(sides[i], sides[i]));
+// Page sides are multiples of this (block-compressed formats such as BC6H and ASTC 4x4 need
+// whole 4 x 4 blocks), or maxSize itself.
+constexpr int kPageAlign = 4;
+
+// The smallest page (by area; ties: the squarer, then the narrower) that holds `items` in
+// order, padded as packPage pads: for each candidate width (multiples of kPageAlign from the
+// items' area bound up to maxSize, at most 128), the skyline's used height gives the height.
+glm::ivec2 smallestPage(int maxSize, int padding, const std::vector<uint32_t>& items,
+                        const std::vector<glm::ivec2>& sizes) {
+  double area = 0.0;
+  int widest = 1;
+  std::vector<glm::ivec2> padded(sizes.size());
+  for (uint32_t i : items) {
+    padded[i] = sizes[i] + glm::ivec2(padding);
+    area += double(padded[i].x) * double(padded[i].y);
+    widest = std::max(widest, padded[i].x + padding);
   }
-  std::stable_sort(sizes.begin(), sizes.end(), [](glm::ivec2 a, glm::ivec2 b) {
-    return int64_t(a.x) * a.y < int64_t(b.x) * b.y;
+  auto align = [&](int x) {
+    return std::min(maxSize, (x + kPageAlign - 1) / kPageAlign * kPageAlign);
+  };
+  const std::vector<int> widths =
+      candidateWidths(std::max(widest, int(std::sqrt(area) / 2.0)), maxSize, kPageAlign, 128);
+  std::vector<int> bins;
+  for (int w : widths) bins.push_back(w - padding);
+  const auto best = packSmallest(padded, items, bins, maxSize - padding, [&](int w, int used) {
+    return glm::ivec2(w + padding, align(used + padding));
   });
-  return sizes;
+  return best ? best->page : glm::ivec2(maxSize);
 }
 
 // Packs `items` (indices into `sizes`, in order) into a bin of page size `page` with padding
@@ -193,7 +206,6 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   for (size_t j = 0; j < lightmapped.size(); ++j) sortKey[j] = sizes[lightmapped[j]];
   std::vector<uint32_t> remaining;
   for (uint32_t j : packingOrder(sortKey)) remaining.push_back(lightmapped[j]);
-  const std::vector<glm::ivec2> candidates = pageSizes(settings.maxSize);
   std::vector<glm::ivec2> corners(scene.objects.size());
   Progress progress("atlas", lightmapped.size(), "objects",
                     settings.showProgress && !lightmapped.empty());
@@ -209,14 +221,11 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     }
     if (members.empty())  // cannot happen: sizes are clamped to fit an empty page
       return Error{describe(scene.objects[remaining.front()]) + ": does not fit a lightmap page"};
-    AtlasPage page;
-    for (glm::ivec2 c : candidates)
-      if (packPage(c, p, members, sizes, corners)) {
-        page.width = c.x;
-        page.height = c.y;
-        break;
-      }
-    assert(page.width > 0);
+    const glm::ivec2 best = smallestPage(settings.maxSize, p, members, sizes);
+    const bool packed = packPage(best, p, members, sizes, corners);
+    assert(packed);  // smallestPage found it by this very packing (or maxSize, which holds all)
+    (void)packed;
+    AtlasPage page{best.x, best.y};
     const int index = int(layout.pages.size());
     layout.pages.push_back(page);
     for (uint32_t i : members) {
@@ -230,7 +239,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     progress.advance(members.size());
   }
   progress.finish();
-  // Pages are powers of two, so they may exceed the objects' area (up to about 4x).
+  // Pages may exceed the objects' area (skyline waste, alignment to 4 texels).
   if (Status budget = checkTexelBudget(layout.pages, "lightmap pages"); !budget)
     return Error{budget.error()};
   return layout;

@@ -84,8 +84,10 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // objects are at least `padding` texels apart, and at least `padding` from the page border).
 // Pages: objects are sorted by height, then width (descending), then object index, and
 // filled into maxSize pages in that order, a new page when one is full; each page is then
-// shrunk to the smallest power-of-two size (w x w or w x w/2, or maxSize itself when it is not
-// a power of two) that holds its objects in the same order. Deterministic.
+// shrunk to the smallest size (by area; sides multiples of 4 as block compression needs, or
+// maxSize) that holds its objects in the same order. Pages need not be powers of two: every
+// GPU API kiln targets samples such textures (lightmaps are not mipmapped), and
+// power-of-two pages left up to half of a page empty. Deterministic.
 // Errors name the setting (maxSize < 1 + 2 padding, resolution <= 0) or the object (no uv1,
 // zero-area uv1).
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);

@@ -12,6 +12,7 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <array>
+#include <cassert>
 #include <cmath>
 #include <deque>
 #include <map>
@@ -736,23 +737,20 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
     itemArea += double(items[i].x) * items[i].y;
     minSide = std::max({minSide, items[i].x, items[i].y});
   }
+  // The bin width that gives the smallest bounding rectangle (that rectangle becomes the
+  // object's rectangle in its page), from half to twice the side of the items' area. Scored
+  // as if widened to an aspect ratio of at most 2: long thin rectangles pack badly into pages
+  // and are the first to hit maxSize.
   const std::vector<uint32_t> order = packingOrder(items);
-  std::vector<glm::ivec2> placed(charts.size());
-  int side = std::max(minSide, int(std::ceil(std::sqrt(itemArea))));
-  for (;;) {
-    SkylinePacker packer(side, side);
-    bool fits = true;
-    for (uint32_t i : order) {
-      const auto at = packer.insert(items[i].x, items[i].y);
-      if (!at) {
-        fits = false;
-        break;
-      }
-      placed[i] = *at;
-    }
-    if (fits) break;
-    side += std::max(1, side / 16);
-  }
+  const int lowest = std::max(minSide, int(std::sqrt(itemArea) / 2.0));
+  const int highest = std::max(lowest, int(std::ceil(2.0 * std::sqrt(itemArea))));
+  const auto packed = packSmallest(items, order, candidateWidths(lowest, highest, 1, 64),
+                                   std::numeric_limits<int>::max() / 2, [](int w, int used) {
+                                     return glm::ivec2(std::max(w, (used + 1) / 2),
+                                                       std::max(used, (w + 1) / 2));
+                                   });
+  assert(packed);  // every width holds the widest chart, and the height is unbounded
+  const std::vector<glm::ivec2>& placed = packed->corners;
 
   // Texel positions, then one uniform scale into [0, 1]^2 (the longer extent becomes 1).
   double extent = 0.0;
