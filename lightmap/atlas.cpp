@@ -100,6 +100,17 @@ bool isLightmapped(const Object& object) {
          object.settings.receiveGI == ReceiveGI::Lightmaps && !object.triangles.empty();
 }
 
+double lightmapTexels(const Object& object, float resolution) {
+  const double density = double(resolution) * object.settings.scaleInLightmap;
+  double area = 0.0;
+  for (uint32_t t = 0; t < object.triangles.size(); ++t) area += object.triangleArea(t);
+  return density * density * area;
+}
+
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels) {
+  return minTexels > 0.0f && lightmapTexels(object, resolution) < double(minTexels);
+}
+
 std::pair<vec2, vec2> uv1Bounds(const Object& object) {
   vec2 lo(kInfinity), hi(-kInfinity);
   for (const uvec3& tri : object.triangles)
@@ -127,6 +138,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   if (!(settings.resolution > 0.0f) || !std::isfinite(settings.resolution))
     return Error{"lightmap resolution must be > 0 texels per unit (got " +
                  std::to_string(settings.resolution) + ")"};
+  if (!(settings.minObjectTexels >= 0.0f) || !std::isfinite(settings.minObjectTexels))
+    return Error{"minObjectTexels must be a finite number >= 0 (got " +
+                 std::to_string(settings.minObjectTexels) + ")"};
   if (settings.maxSize < 1 + 2 * p)
     return Error{"lightmap maxSize " + std::to_string(settings.maxSize) +
                  " cannot hold one texel with padding " + std::to_string(p) +
@@ -140,7 +154,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
                    " objects, the scene " + std::to_string(scene.objects.size())};
     for (size_t i = 0; i < scene.objects.size(); ++i) {
       const int page = locked.objects[i].lightmapIndex;
-      if (isLightmapped(scene.objects[i]) != (page >= 0))
+      if (isLightmapped(scene.objects[i]) != (page >= 0 || locked.objects[i].probeLit))
         return Error{"locked atlas: " + describe(scene.objects[i]) +
                      (page >= 0 ? " has a lightmap in the locked atlas but is not lightmapped"
                                 : " is lightmapped but has no lightmap in the locked atlas")};
@@ -159,9 +173,15 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   std::vector<uint32_t> lightmapped;
   std::vector<glm::ivec2> sizes(scene.objects.size(), glm::ivec2(0));
   std::vector<std::pair<vec2, vec2>> bounds(scene.objects.size());
+  std::vector<std::string> probeLit;
   for (uint32_t i = 0; i < scene.objects.size(); ++i) {
     const Object& o = scene.objects[i];
     if (!isLightmapped(o)) continue;
+    if (tooSmallForLightmap(o, settings.resolution, settings.minObjectTexels)) {
+      layout.objects[i].probeLit = true;
+      probeLit.push_back("'" + o.name + "'");
+      continue;
+    }
     if (o.uv1.size() != o.positions.size())
       return Error{describe(o) + ": has no lightmap UVs (TEXCOORD_1); generate them first"};
     bounds[i] = uv1Bounds(o);
@@ -187,6 +207,17 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     layout.objects[i].texelSize = size;
     layout.objects[i].texelsPerUnit = float(k * std::sqrt(a.uv / a.world));
     lightmapped.push_back(i);
+  }
+
+  if (!probeLit.empty()) {
+    std::ostringstream w;
+    w << probeLit.size() << " object(s) would get fewer than " << settings.minObjectTexels
+      << " lightmap texels at " << settings.resolution
+      << " texels per unit and are lit by probes instead (manifest: \"probeLit\"): ";
+    const size_t shown = std::min<size_t>(probeLit.size(), 20);
+    for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << probeLit[k];
+    if (shown < probeLit.size()) w << " and " << probeLit.size() - shown << " more";
+    layout.warnings.push_back(w.str());
   }
 
   // The texel budget, before packing and before anything the size of a page is allocated:
@@ -279,6 +310,12 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
       return Error{at + ": nodeIndex " + std::to_string(mo.nodeIndex) + " is '" + mo.node +
                    "' in the manifest but '" + o.name + "' in the scene"};
     const int page = mo.lightmapIndex;
+    if (mo.probeLit) {
+      if (!isLightmapped(o))
+        return Error{at + ": " + describe(o) +
+                     " is probe-lit in the manifest but is not lightmapped in the scene"};
+      layout.objects[i].probeLit = true;
+    }
     if (page < 0) continue;
     if (!isLightmapped(o))
       return Error{at + ": " + describe(o) +
@@ -307,7 +344,8 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
     ao.texelsPerUnit = ar.world > 0.0 ? float(s.x * dims.x * std::sqrt(ar.uv / ar.world)) : 0.0f;
   }
   for (uint32_t i = 0; i < scene.objects.size(); ++i)
-    if (isLightmapped(scene.objects[i]) && layout.objects[i].lightmapIndex < 0)
+    if (isLightmapped(scene.objects[i]) && layout.objects[i].lightmapIndex < 0 &&
+        !layout.objects[i].probeLit)
       return Error{where + ": " + describe(scene.objects[i]) +
                    " is lightmapped but the manifest gives it no lightmap"};
   return layout;

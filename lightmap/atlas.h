@@ -38,6 +38,9 @@ struct AtlasObject {
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // (sx, sy, ox, oy)
   // Texels per world unit the object actually got (below resolution x scale when clamped).
   float texelsPerUnit = 0.0f;
+  // Lightmapped by its settings, but its surface would get fewer than minObjectTexels
+  // texels: lit by probes instead (Unity's receiveGI = probes), no page (lightmapIndex -1).
+  bool probeLit = false;
 };
 
 struct AtlasLayout {
@@ -54,8 +57,27 @@ inline constexpr uint64_t kMaxLightmapTexels = uint64_t(1) << 27;
 // Success when `pages` hold at most kMaxLightmapTexels; else an error starting with `what`.
 Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what);
 
+// Default of AtlasSettings::minObjectTexels, UnwrapSettings::minObjectTexels and kiln bake's
+// --min-object-texels: 0, every lightmapped object gets a lightmap. Off by default because
+// one threshold does not fit every resolution (quick bakes at 2-8 texels per unit would lose
+// whole rooms); 64-128 suits bakes at 25-64 texels per unit, where a smaller lightmap holds
+// little more than the one colour the probes around the object give as well (with
+// direction), in charts of a texel or two that cost more gutter than they hold.
+inline constexpr float kMinObjectTexels = 0.0f;
+
+// The texels an object's surface gets at `resolution` (Unity's rule, before packing):
+// (resolution x scaleInLightmap)^2 x its world area.
+double lightmapTexels(const Object& object, float resolution);
+
+// Whether a lightmapped object (isLightmapped) is lit by probes instead because
+// lightmapTexels < minTexels.
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels);
+
 struct AtlasSettings {
   float resolution = 10.0f;  // texels per world unit (before scaleInLightmap)
+  // Lightmapped objects whose surface would get fewer texels than this are lit by probes
+  // instead (AtlasObject::probeLit), named in a warning. 0 = every object gets a lightmap.
+  float minObjectTexels = kMinObjectTexels;
   int padding = 2;           // texels kept empty around every object (see packAtlas)
   int maxSize = 1024;        // largest page width and height, texels
   // When set, packAtlas checks it against the scene and returns it instead of packing
@@ -88,13 +110,16 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // maxSize) that holds its objects in the same order. Pages need not be powers of two: every
 // GPU API kiln targets samples such textures (lightmaps are not mipmapped), and
 // power-of-two pages left up to half of a page empty. Deterministic.
+// Objects too small for a useful lightmap (tooSmallForLightmap) get no page and probeLit,
+// and one warning names them; they need no uv1.
 // Errors name the setting (maxSize < 1 + 2 padding, resolution <= 0) or the object (no uv1,
 // zero-area uv1).
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);
 
 // The manifest's atlas part (manifest.h writes it): {"lightmaps": [{"index", "width",
 // "height"}], "objects": [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox,
-// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1.
+// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1,
+// and "probeLit": true when they are lit by probes for being too small.
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene);
 
 // Reads a layout back from a manifest (checked by readManifest, ManifestUse::kAtlas; errors
@@ -103,7 +128,7 @@ Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scen
 
 // The layout of a manifest that readManifest returned, for `scene`: objects are matched by
 // nodeIndex and their node name must agree; every lightmapped scene object needs an entry
-// with a page, and entries with a page must be lightmapped objects. Texel rectangles are
+// with a page or probeLit, and entries with a page must be lightmapped objects. Texel rectangles are
 // recovered from scaleOffset and the objects' UV1 bounds and must lie inside their page.
 // Errors start with `where` (the manifest's file) and name the object.
 Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& scene,

@@ -859,7 +859,8 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   std::vector<std::optional<UnwrapResult>> unwraps(n);
   std::vector<std::string> errors(n);
   auto needs = [&](const Object& o) {
-    return isLightmapped(o) && o.uv1.size() != o.positions.size();
+    return isLightmapped(o) && o.uv1.size() != o.positions.size() &&
+           !tooSmallForLightmap(o, resolution, settings.minObjectTexels);
   };
   // Progress in triangles: objects differ wildly in size, and time grows with triangles.
   size_t triangles = 0;

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "kiln/result.h"
+#include "lightmap/atlas.h"
 #include "src/scene.h"
 
 namespace kiln {
@@ -47,6 +48,10 @@ struct UnwrapSettings {
   // Charts whose normals all lie within this angle of their mean normal are projected onto
   // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
   float planarAngleDegrees = 1.0f;
+  // generateMissingLightmapUvs only: objects too small for a useful lightmap
+  // (atlas.h tooSmallForLightmap with this threshold; keep it equal to the atlas's
+  // minObjectTexels) are lit by probes and get no UVs.
+  float minObjectTexels = kMinObjectTexels;
   // generateMissingLightmapUvs only: a progress line on stderr ("UV generation", in
   // triangles), and a flag polled between objects that stops it with an Error "cancelled".
   bool showProgress = false;
@@ -92,7 +97,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
 Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 
 // For the bake: generates UVs for every lightmapped object (atlas.h isLightmapped) of the
-// scene that has no TEXCOORD_1, at texelsPerUnit = resolution x its scaleInLightmap (the
+// scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels), at texelsPerUnit = resolution x its scaleInLightmap (the
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,
 // per scene object, its unwrap (nullopt: kept its own UVs, or not lightmapped) so that the
 // output glTF writer can rebuild the primitives. Objects run in parallel; deterministic.

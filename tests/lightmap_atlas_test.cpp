@@ -112,6 +112,47 @@ TEST(LightmapAtlas, NotLightmappedObjectsGetNoPage) {
   EXPECT_EQ(layout->objects[probe].lightmapIndex, -1);
 }
 
+TEST(LightmapAtlas, ObjectsTooSmallForALightmapAreProbeLit) {
+  // At 10 texels per unit a 1 x 1 quad gets 100 texels, a 0.3 x 0.3 quad 9 and a 0.3 x 0.3
+  // quad with scaleInLightmap 2 gets 36: with minObjectTexels 16, only the second is lit by
+  // probes, needs no UVs and gets no page.
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "big", 1.0f, 1.0f);
+  const uint32_t tiny = addFloor(scene, "tiny", 0.3f, 0.3f, 1.0f);
+  const uint32_t scaled = addFloor(scene, "scaled", 0.3f, 0.3f, 2.0f);
+  scene.objects[scaled].settings.scaleInLightmap = 2.0f;
+  scene.objects[tiny].uv1.clear();
+  EXPECT_NEAR(lightmapTexels(scene.objects[tiny], 10.0f), 9.0, 1e-4);
+  EXPECT_NEAR(lightmapTexels(scene.objects[scaled], 10.0f), 36.0, 1e-4);
+  AtlasSettings settings;
+  settings.resolution = 10.0f;
+  settings.minObjectTexels = 16.0f;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_EQ(layout->objects[tiny].lightmapIndex, -1);
+  EXPECT_TRUE(layout->objects[tiny].probeLit);
+  EXPECT_EQ(layout->objects[0].lightmapIndex, 0);
+  EXPECT_EQ(layout->objects[scaled].lightmapIndex, 0);
+  EXPECT_FALSE(layout->objects[scaled].probeLit);
+  ASSERT_EQ(layout->warnings.size(), 1u);
+  EXPECT_NE(layout->warnings[0].find("'tiny'"), std::string::npos) << layout->warnings[0];
+  expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+  // Through the manifest and back, as --lock-atlas reads it: still probe-lit.
+  const auto back = atlasFromManifest(atlasToJson(*layout, scene), scene);
+  ASSERT_TRUE(back.ok()) << back.error();
+  EXPECT_TRUE(back->objects[tiny].probeLit);
+  EXPECT_EQ(back->objects[tiny].lightmapIndex, -1);
+  settings.locked = *back;
+  EXPECT_TRUE(packAtlas(scene, settings).ok());
+  // Off (0, the default): every object gets a page, and the one without UVs is an error.
+  settings.locked.reset();
+  settings.minObjectTexels = 0.0f;
+  const auto all = packAtlas(scene, settings);
+  ASSERT_FALSE(all.ok());
+  EXPECT_NE(all.error().find("'tiny'"), std::string::npos) << all.error();
+}
+
 TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {
   const Scene scene = assortedScene(60);
   AtlasSettings settings;
