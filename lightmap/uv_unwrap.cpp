@@ -1,5 +1,6 @@
 // uv_unwrap.cpp: lightmap UV generation: welding, chart growing by normal cone, planar
-// projection or LSCM per chart, minimum-area orientation and skyline packing.
+// projection or LSCM per chart, minimum-area orientation and packing by chart shape
+// (chart_packer.h).
 //
 // LSCM: B. Lévy, S. Petitjean, N. Ray, J. Maillot, "Least Squares Conformal Maps for
 // Automatic Texture Atlas Generation", SIGGRAPH 2002 (the complex per-triangle energy of
@@ -12,7 +13,6 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <array>
-#include <cassert>
 #include <cmath>
 #include <deque>
 #include <map>
@@ -21,7 +21,7 @@
 #include <unordered_map>
 
 #include "lightmap/atlas.h"
-#include "lightmap/skyline_packer.h"
+#include "lightmap/chart_packer.h"
 #include "src/parallel.h"
 
 namespace kiln {
@@ -692,11 +692,6 @@ dvec2 normalizeChart(const WeldedMesh& m, Chart& c) {
   return hi - lo;
 }
 
-int texelsUp(double x) {
-  // Round up to whole texels, tolerating float noise on exact multiples.
-  return std::max(1, int(std::ceil(x - 1e-6)));
-}
-
 }  // namespace
 
 Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings) {
@@ -724,40 +719,40 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   buildCharts(m, good, settings.maxChartAngleDegrees, settings, charts);
   mergeCharts(m, settings, charts);
 
-  // Charts in texels at the expected density, packed with the gutter between them.
+  // Charts in texels at the expected density, packed by their shape (chart_packer.h) with
+  // the gutter between their covered texels.
   const double d = settings.texelsPerUnit;
-  const int gutter = settings.gutterTexels;
-  std::vector<dvec2> extents(charts.size());
-  std::vector<glm::ivec2> items(charts.size());
-  double itemArea = 0.0;
-  int minSide = 1;
+  std::vector<ChartFootprint> footprints(charts.size());
   for (size_t i = 0; i < charts.size(); ++i) {
-    extents[i] = normalizeChart(m, charts[i]);
-    items[i] = glm::ivec2(texelsUp(extents[i].x * d) + gutter, texelsUp(extents[i].y * d) + gutter);
-    itemArea += double(items[i].x) * items[i].y;
-    minSide = std::max({minSide, items[i].x, items[i].y});
+    const dvec2 extent = normalizeChart(m, charts[i]);
+    std::vector<std::array<dvec2, 3>> tris;
+    tris.reserve(charts[i].triangles.size());
+    for (uint32_t t : charts[i].triangles) {
+      const Chart& c = charts[i];
+      tris.push_back({c.uv[c.local(m.tris[t][0])] * d, c.uv[c.local(m.tris[t][1])] * d,
+                      c.uv[c.local(m.tris[t][2])] * d});
+    }
+    footprints[i] = chartFootprint(tris, extent * d);
   }
-  // The bin width that gives the smallest bounding rectangle (that rectangle becomes the
-  // object's rectangle in its page), from half to twice the side of the items' area. Scored
-  // as if widened to an aspect ratio of at most 2: long thin rectangles pack badly into pages
-  // and are the first to hit maxSize.
-  const std::vector<uint32_t> order = packingOrder(items);
-  const int lowest = std::max(minSide, int(std::sqrt(itemArea) / 2.0));
-  const int highest = std::max(lowest, int(std::ceil(2.0 * std::sqrt(itemArea))));
-  const auto packed = packSmallest(items, order, candidateWidths(lowest, highest, 1, 64),
-                                   std::numeric_limits<int>::max() / 2, [](int w, int used) {
-                                     return glm::ivec2(std::max(w, (used + 1) / 2),
-                                                       std::max(used, (w + 1) / 2));
-                                   });
-  assert(packed);  // every width holds the widest chart, and the height is unbounded
-  const std::vector<glm::ivec2>& placed = packed->corners;
+  const ChartPacking packed = packCharts(footprints, settings.gutterTexels);
+  // A chart's texel position: its corner plus its own texel coordinates, turned by 180
+  // degrees about the centre of its footprint when the packer turned it (a rotation: the
+  // orientation is kept).
+  auto texelPosition = [&](uint32_t chart, dvec2 uvWorld) {
+    const ChartFootprint& f = footprints[chart];
+    const dvec2 p = uvWorld * d + f.offset;  // footprint coordinates (chart_packer.h)
+    return dvec2(packed.corners[chart]) +
+           (packed.turned[chart] ? dvec2(f.columns, f.rows) - p : p);
+  };
 
-  // Texel positions, then one uniform scale into [0, 1]^2 (the longer extent becomes 1).
+  // Texel positions (all > 0: charts sit inside their footprints), then one uniform scale
+  // into [0, 1]^2 (the longer extent becomes 1).
   double extent = 0.0;
-  for (size_t i = 0; i < charts.size(); ++i) {
-    extent = std::max(extent, placed[i].x + extents[i].x * d);
-    extent = std::max(extent, placed[i].y + extents[i].y * d);
-  }
+  for (uint32_t i = 0; i < charts.size(); ++i)
+    for (const dvec2& uv : charts[i].uv) {
+      const dvec2 p = texelPosition(i, uv);
+      extent = std::max({extent, p.x, p.y});
+    }
   if (!(extent > 0.0)) extent = 1.0;
   const double uvPerTexel = 1.0 / extent;
 
@@ -783,7 +778,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
         dvec2 uv(0.0);  // degenerate triangles collapse to the origin: no area, no texels
         if (chart < charts.size()) {
           const Chart& c = charts[chart];
-          uv = (dvec2(placed[chart]) + c.uv[c.local(m.tris[t][k])] * d) * uvPerTexel;
+          uv = texelPosition(chart, c.uv[c.local(m.tris[t][k])]) * uvPerTexel;
         }
         r.uv1.push_back(vec2(uv));
       }
