@@ -191,7 +191,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
       return Error{describe(o) + ": its lightmap UVs (TEXCOORD_1) have zero area"};
     // Texels per UV unit so that the triangles get (resolution x scale)^2 x world area texels.
     const double density = double(settings.resolution) * o.settings.scaleInLightmap;
-    double k = density * std::sqrt(a.world / a.uv);
+    const bool generated = i < settings.worldPerUv.size() && settings.worldPerUv[i] > 0.0;
+    const double worldPerUv = generated ? settings.worldPerUv[i] : std::sqrt(a.world / a.uv);
+    double k = density * worldPerUv;
     const double eu = double(hi.x) - lo.x, ev = double(hi.y) - lo.y;
     glm::ivec2 size(texelsUp(k * eu), texelsUp(k * ev));
     if (std::max(size.x, size.y) > limit) {
@@ -200,12 +202,12 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
       std::ostringstream w;
       w << describe(o) << ": lightmap scaled down to " << size.x << " x " << size.y
         << " texels to fit maxSize " << settings.maxSize << " with padding " << p << " ("
-        << k * std::sqrt(a.uv / a.world) << " instead of " << density << " texels per unit)";
+        << k / worldPerUv << " instead of " << density << " texels per unit)";
       layout.warnings.push_back(w.str());
     }
     sizes[i] = size;
     layout.objects[i].texelSize = size;
-    layout.objects[i].texelsPerUnit = float(k * std::sqrt(a.uv / a.world));
+    layout.objects[i].texelsPerUnit = float(k / worldPerUv);
     lightmapped.push_back(i);
   }
 

@@ -78,6 +78,12 @@ struct AtlasSettings {
   // Lightmapped objects whose surface would get fewer texels than this are lit by probes
   // instead (AtlasObject::probeLit), named in a warning. 0 = every object gets a lightmap.
   float minObjectTexels = kMinObjectTexels;
+  // Per scene object (or empty): the world units per UV unit its generated UVs were made
+  // with (UnwrapResult::worldPerUv), 0 = not generated. Such an object gets exactly
+  // resolution x scaleInLightmap x worldPerUv texels per UV unit, the density its charts
+  // were packed for, instead of the area rule below (which shrunk charts of sealed surfaces
+  // would skew).
+  std::vector<double> worldPerUv;
   int padding = 2;           // texels kept empty around every object (see packAtlas)
   int maxSize = 1024;        // largest page width and height, texels
   // When set, packAtlas checks it against the scene and returns it instead of packing
@@ -98,7 +104,8 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 
 // Packs every lightmapped object of the scene. Size rule: an object with world area A, UV1
 // triangle area A_uv (sum of |UV triangle areas|) and UV1 bounding rectangle of extent
-// (eu, ev) gets k = resolution x scaleInLightmap x sqrt(A / A_uv) texels per UV unit, so its
+// (eu, ev) gets k = resolution x scaleInLightmap x sqrt(A / A_uv) texels per UV unit (with
+// generated UVs: resolution x scaleInLightmap x settings.worldPerUv), so its
 // triangles cover (resolution x scale)^2 x A texels, and a rectangle of
 // w = ceil(k eu) x h = ceil(k ev) texels (at least 1). When max(w, h) > maxSize - 2 padding,
 // k is scaled down to fit and a warning names the object.

@@ -653,6 +653,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   atlas.padding = settings.padding;
   atlas.maxSize = settings.maxSize;
   atlas.minObjectTexels = settings.minObjectTexels;
+  for (const std::optional<UnwrapResult>& u : result.unwraps)
+    atlas.worldPerUv.push_back(u ? u->worldPerUv : 0.0);
   atlas.locked = settings.lockedAtlas;
   atlas.showProgress = showProgress;
   atlas.cancel = cancel;

@@ -22,6 +22,7 @@
 
 #include "lightmap/atlas.h"
 #include "lightmap/chart_packer.h"
+#include "lightmap/sealed_surfaces.h"
 #include "src/parallel.h"
 
 namespace kiln {
@@ -52,10 +53,17 @@ struct WeldedMesh {
   // mesh shades as one). Charts do not grow over hard edges, so that bilinear lookups never
   // mix the light of the two sides of a crease.
   std::vector<std::array<bool, 3>> hard;
+  // Per triangle, 1 when no light reaches it (sealed_surfaces.h): such triangles and the
+  // others never share a chart.
+  std::vector<uint8_t> sealed;
 };
 
-WeldedMesh weld(const Object& object) {
+WeldedMesh weld(const Object& object, const std::vector<uint8_t>* sealed) {
   WeldedMesh m;
+  if (sealed && sealed->size() == object.triangles.size())
+    m.sealed = *sealed;
+  else
+    m.sealed.assign(object.triangles.size(), 0);
   // Exact position equality: glTF exporters duplicate vertices bit-for-bit at seams. The
   // comparison treats -0 and +0 as equal; positions were checked to be finite.
   std::map<std::array<float, 3>, uint32_t> ids;
@@ -157,6 +165,33 @@ WeldedMesh weld(const Object& object) {
   return m;
 }
 
+// Sealed regions (edge-connected sealed triangles) smaller than `minArea` are treated as
+// lit: shrinking them would save less than the charts they cut out of their neighbours cost.
+void unsealSmallRegions(WeldedMesh& m, double minArea) {
+  std::vector<uint8_t> seen(m.tris.size(), 0);
+  std::vector<uint32_t> region, stack;
+  for (uint32_t seed = 0; seed < m.tris.size(); ++seed) {
+    if (!m.sealed[seed] || seen[seed]) continue;
+    region.clear();
+    stack.assign(1, seed);
+    seen[seed] = 1;
+    double area = 0.0;
+    while (!stack.empty()) {
+      const uint32_t t = stack.back();
+      stack.pop_back();
+      region.push_back(t);
+      area += m.areas[t];
+      for (int32_t n : m.neighbours[t])
+        if (n >= 0 && m.sealed[n] && !seen[n]) {
+          seen[n] = 1;
+          stack.push_back(uint32_t(n));
+        }
+    }
+    if (area < minArea)
+      for (uint32_t t : region) m.sealed[t] = 0;
+  }
+}
+
 // Grows charts over `subset` (ascending triangle indices). Seeds are taken largest triangle
 // first (ties: lowest index), so that big flat regions start charts of their own; a chart
 // takes edge neighbours across soft edges, most aligned with the chart's area-weighted mean
@@ -204,7 +239,9 @@ std::vector<std::vector<uint32_t>> growCharts(const WeldedMesh& m,
       const dvec3 newMean = glm::normalize(sum);
       for (int k = 0; k < 3; ++k) {
         const int32_t n = m.neighbours[t][k];
-        if (n < 0 || state[n] != 1 || m.hard[t][k] || stamp[n] == id) continue;
+        if (n < 0 || state[n] != 1 || m.hard[t][k] || stamp[n] == id ||
+            m.sealed[n] != m.sealed[t])
+          continue;
         stamp[n] = id;
         heap.emplace_back(1.0 - glm::dot(m.normals[n], newMean), uint32_t(n));
         std::push_heap(heap.begin(), heap.end(), std::greater<>());
@@ -586,7 +623,9 @@ void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vecto
             ++shared[uint32_t(chartOf[nb])];
         }
       std::vector<std::pair<int, uint32_t>> candidates;  // (-shared edges, chart)
-      for (auto [chart, count] : shared) candidates.emplace_back(-count, chart);
+      for (auto [chart, count] : shared)
+        if (m.sealed[charts[chart].triangles.front()] == m.sealed[charts[c].triangles.front()])
+          candidates.emplace_back(-count, chart);
       std::sort(candidates.begin(), candidates.end());
       for (auto [negCount, other] : candidates) {
         if (!small) {
@@ -694,7 +733,8 @@ dvec2 normalizeChart(const WeldedMesh& m, Chart& c) {
 
 }  // namespace
 
-Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings) {
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings,
+                                         const std::vector<uint8_t>* sealed) {
   const std::string who = "object '" + object.name + "'";
   if (!(settings.texelsPerUnit > 0.0f) || !std::isfinite(settings.texelsPerUnit))
     return Error{who + ": unwrap texelsPerUnit must be > 0 (got " +
@@ -711,7 +751,15 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
       return Error{who + ": triangles[" + std::to_string(t) + "] has a vertex index out of range"};
   }
 
-  const WeldedMesh m = weld(object);
+  if (!(settings.sealedTexels > 0.0f) || !std::isfinite(settings.sealedTexels))
+    return Error{who + ": unwrap sealedTexels must be > 0"};
+  if (sealed && sealed->size() != object.triangles.size())
+    return Error{who + ": sealed flags for " + std::to_string(sealed->size()) +
+                 " triangles, the object has " + std::to_string(object.triangles.size())};
+
+  WeldedMesh m = weld(object, settings.shrinkSealed ? sealed : nullptr);
+  unsealSmallRegions(m, double(settings.smallChartTexels) /
+                            (double(settings.texelsPerUnit) * settings.texelsPerUnit));
   std::vector<uint32_t> good, degenerate;
   for (uint32_t t = 0; t < m.tris.size(); ++t) (m.degenerate[t] ? degenerate : good).push_back(t);
 
@@ -723,8 +771,17 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   // the gutter between their covered texels.
   const double d = settings.texelsPerUnit;
   std::vector<ChartFootprint> footprints(charts.size());
+  std::vector<bool> shrunk(charts.size(), false);
   for (size_t i = 0; i < charts.size(); ++i) {
-    const dvec2 extent = normalizeChart(m, charts[i]);
+    dvec2 extent = normalizeChart(m, charts[i]);
+    // Sealed: at most sealedTexels across (the same scale on both axes: no flip, no fold).
+    const double across = std::max(extent.x, extent.y) * d;
+    if (m.sealed[charts[i].triangles.front()] && across > settings.sealedTexels) {
+      const double scale = settings.sealedTexels / across;
+      for (dvec2& uv : charts[i].uv) uv *= scale;
+      extent *= scale;
+      shrunk[i] = true;
+    }
     std::vector<std::array<dvec2, 3>> tris;
     tris.reserve(charts[i].triangles.size());
     for (uint32_t t : charts[i].triangles) {
@@ -791,6 +848,11 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   s.chartCount = int(charts.size());
   s.degenerateTriangles = int(degenerate.size());
   for (const Chart& c : charts) s.planarCharts += c.planar ? 1 : 0;
+  for (size_t i = 0; i < charts.size(); ++i)
+    if (shrunk[i]) {
+      ++s.sealedCharts;
+      s.sealedTriangles += int(charts[i].triangles.size());
+    }
   double sumArea = 0.0, sumStretch = 0.0, uvAreaSum = 0.0;
   dvec2 uvMax(0.0);
   for (const vec2& uv : r.uv1) uvMax = glm::max(uvMax, dvec2(uv));
@@ -805,6 +867,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
       ++s.flippedTriangles;
       continue;
     }
+    if (shrunk[r.triangleChart[t]]) continue;  // distortion is measured on full-size charts
     // Jacobian J = [u1-u0 u2-u0] [z1-z0 z2-z0]^-1 of the map from the surface to UV.
     const glm::dmat2 q(z[1] - z[0], z[2] - z[0]);
     const glm::dmat2 u(u1 - u0, u2 - u0);
@@ -863,6 +926,20 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
     if (needs(o)) triangles += o.triangles.size();
   Progress progress("UV generation", triangles, "triangles",
                     settings.showProgress && triangles > 0);
+  // Sealed triangles, from rays over the static objects (what the bake's tracer holds). A
+  // scene without any light (no lights, a black sky, nothing emissive: an AO-only bake, a
+  // test scene) has no sealed surfaces to tell apart: everything would be.
+  bool anyLight = !scene.lights.empty() || !scene.sky.isBlack();
+  for (const Material& material : scene.materials) anyLight |= material.isEmissive();
+  std::vector<std::vector<uint8_t>> sealed;
+  if (settings.shrinkSealed && anyLight && triangles > 0) {
+    auto tracer = Tracer::create(scene, TracerGeometry::BakedGI);
+    if (!tracer) return Error{"sealed surfaces: " + tracer.error()};
+    SealedSettings ss;
+    ss.parallel.cancel = settings.cancel;
+    sealed = findSealedTriangles(scene, **tracer, ss);
+    if (settings.cancel && settings.cancel->load()) return Error{"cancelled"};
+  }
   ParallelOptions options;
   options.grain = 1;  // objects differ wildly in size
   options.cancel = settings.cancel;
@@ -875,7 +952,8 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
           if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) return;
           UnwrapSettings s = settings;
           s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
-          Result<UnwrapResult> r = generateLightmapUvs(o, s);
+          Result<UnwrapResult> r = generateLightmapUvs(
+              o, s, i < sealed.size() && !sealed[i].empty() ? &sealed[i] : nullptr);
           if (r.ok())
             unwraps[i] = std::move(*r);
           else

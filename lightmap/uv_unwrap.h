@@ -48,6 +48,13 @@ struct UnwrapSettings {
   // Charts whose normals all lie within this angle of their mean normal are projected onto
   // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
   float planarAngleDegrees = 1.0f;
+  // Charts whose triangles no light reaches (sealed_surfaces.h: a box's face resting on the
+  // floor, the backs of a closed shell) are shrunk to at most sealedTexels texels across:
+  // their lightmap is black or meaningless, and full resolution would spend atlas space on
+  // it. generateLightmapUvs takes the sealed triangles from its caller;
+  // generateMissingLightmapUvs finds them with rays when this is true. 0 < sealedTexels.
+  bool shrinkSealed = true;
+  float sealedTexels = 1.0f;
   // generateMissingLightmapUvs only: objects too small for a useful lightmap
   // (atlas.h tooSmallForLightmap with this threshold; keep it equal to the atlas's
   // minObjectTexels) are lit by probes and get no UVs.
@@ -64,6 +71,8 @@ struct UnwrapStats {
   int planarCharts = 0;         // of which projected rather than solved with LSCM
   int degenerateTriangles = 0;  // zero-area triangles, mapped to a point of UV space
   int flippedTriangles = 0;     // UV triangles with non-positive signed area (should be 0)
+  int sealedCharts = 0;         // charts shrunk because no light reaches them
+  int sealedTriangles = 0;      // triangles in them
   // Area-weighted L2 stretch (Sander et al. 2001) of the map surface -> UV in world units:
   // sqrt(sum A (s1^2 + s2^2) / 2 / sum A), where s1 >= s2 are the Jacobian's singular values.
   // 1 when every chart is an isometry.
@@ -81,23 +90,29 @@ struct UnwrapResult {
   std::vector<uvec3> triangles;         // indices into the new vertices
   std::vector<vec2> uv1;                // per new vertex, in [0, 1]^2; max(extent) == 1
   std::vector<uint32_t> triangleChart;  // per triangle, chart index (degenerate: own index)
-  // World units per UV unit, the same everywhere: a UV length l is l x worldPerUv metres.
+  // World units per UV unit, the same in every chart but the sealed ones (shrunk): a UV
+  // length l is l x worldPerUv metres.
   double worldPerUv = 1.0;
   UnwrapStats stats;
 };
 
-// Generates lightmap UVs for `object` (world-space positions; normals, uv0 and uv1 are not
-// read). Deterministic: the same object and settings give bit-identical output. Thread-safe
-// (no shared state). Errors name the object: no triangles, an index out of range, or a
-// settings value out of range.
-Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings);
+// Generates lightmap UVs for `object` (world-space positions and normals; uv0 and uv1 are not
+// read). `sealed` (optional, one entry per triangle, 1 = no light reaches it) marks the
+// triangles that get charts of their own, shrunk when settings.shrinkSealed. Deterministic:
+// the same object and settings give bit-identical output. Thread-safe (no shared state).
+// Errors name the object: no triangles, an index out of range, or a settings value out of
+// range.
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings,
+                                         const std::vector<uint8_t>* sealed = nullptr);
 
 // The object rebuilt on the unwrap's vertices: positions, normals and uv0 gathered through
 // vertexRemap, triangles and uv1 from the result; name, material and settings kept.
 Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 
 // For the bake: generates UVs for every lightmapped object (atlas.h isLightmapped) of the
-// scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels), at texelsPerUnit = resolution x its scaleInLightmap (the
+// scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels),
+// with its sealed triangles found by rays over the scene's static objects when
+// settings.shrinkSealed, at texelsPerUnit = resolution x its scaleInLightmap (the
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,
 // per scene object, its unwrap (nullopt: kept its own UVs, or not lightmapped) so that the
 // output glTF writer can rebuild the primitives. Objects run in parallel; deterministic.
