@@ -124,18 +124,27 @@ Placement place(const Shape& s, const std::vector<int>& heights, int width, int 
 
 }  // namespace
 
-ChartPacking packCharts(const std::vector<ChartFootprint>& charts, int gutter) {
+ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
+                        const std::vector<ChartFootprint>& quarter, int gutter) {
   ChartPacking best;
+  const std::vector<ChartFootprint>& charts = upright;
   if (charts.empty()) return best;
+  const bool quarters = quarter.size() == charts.size();
   std::vector<glm::ivec2> sizes(charts.size());
   double area = 0.0;
   int widest = 1;
-  std::vector<std::array<Shape, 2>> shapes(charts.size());
+  // Per chart: upright, upright turned, quarter, quarter turned.
+  std::vector<std::vector<Shape>> shapes(charts.size());
   for (size_t i = 0; i < charts.size(); ++i) {
     sizes[i] = glm::ivec2(charts[i].columns, charts[i].rows);
     area += double(sizes[i].x + gutter) * double(sizes[i].y + gutter);
-    widest = std::max(widest, charts[i].columns);
+    widest = std::max(widest, quarters ? std::min(charts[i].columns, quarter[i].columns)
+                                       : charts[i].columns);
     shapes[i] = {makeShape(charts[i], false, gutter), makeShape(charts[i], true, gutter)};
+    if (quarters) {
+      shapes[i].push_back(makeShape(quarter[i], false, gutter));
+      shapes[i].push_back(makeShape(quarter[i], true, gutter));
+    }
   }
   const std::vector<uint32_t> order = packingOrder(sizes);
   // Each width costs about width x sum of chart widths; bound the work per object.
@@ -143,29 +152,44 @@ ChartPacking packCharts(const std::vector<ChartFootprint>& charts, int gutter) {
   const int highest = std::max(lowest, int(std::ceil(2.0 * std::sqrt(area))));
   double columnSum = 0.0;
   for (const ChartFootprint& f : charts) columnSum += f.columns + 2 * gutter;
-  const int count = int(std::clamp(4e7 / (columnSum * highest + 1.0), 2.0, 48.0));
+  const double orientations = quarters ? 4.0 : 2.0;
+  const int count =
+      int(std::clamp(8e7 / (orientations * columnSum * highest + 1.0), 2.0, 48.0));
   int64_t bestScore = INT64_MAX;
   std::vector<int> heights;
   ChartPacking trial;
   for (int width : candidateWidths(lowest, highest, 1, count)) {
     heights.assign(size_t(width), 0);
     trial.corners.assign(charts.size(), glm::ivec2(0));
+    trial.quarter.assign(charts.size(), false);
     trial.turned.assign(charts.size(), false);
     int usedWidth = 0, usedHeight = 0;
+    bool fits = true;
     for (uint32_t i : order) {
-      Placement p = place(shapes[i][0], heights, width, gutter);
-      const Placement q = place(shapes[i][1], heights, width, gutter);
-      const bool turned = q.end < p.end;
-      if (turned) p = q;
-      const Shape& s = shapes[i][turned ? 1 : 0];
+      Placement p;
+      size_t chosen = 0;
+      for (size_t o = 0; o < shapes[i].size(); ++o) {
+        const Placement q = place(shapes[i][o], heights, width, gutter);
+        if (q.end < p.end) {
+          p = q;
+          chosen = o;
+        }
+      }
+      if (p.end == INT_MAX) {  // wider than the bin in every orientation
+        fits = false;
+        break;
+      }
+      const Shape& s = shapes[i][chosen];
       for (int c = 0; c < s.columns; ++c)
         if (s.top[size_t(c)] >= 0)
           heights[size_t(p.x + c)] = std::max(heights[size_t(p.x + c)], p.y + s.top[size_t(c)]);
       trial.corners[i] = glm::ivec2(p.x, p.y);
-      trial.turned[i] = turned;
+      trial.quarter[i] = chosen >= 2;
+      trial.turned[i] = chosen % 2 == 1;
       usedWidth = std::max(usedWidth, p.x + s.last + 1);
       usedHeight = std::max(usedHeight, p.y + s.highest);
     }
+    if (!fits) continue;
     trial.size = glm::ivec2(usedWidth, usedHeight);
     const int64_t score = int64_t(std::max(usedWidth, (usedHeight + 1) / 2)) *
                           std::max(usedHeight, (usedWidth + 1) / 2);

@@ -36,15 +36,20 @@ ChartFootprint chartFootprint(const std::vector<std::array<glm::dvec2, 3>>& tria
 
 struct ChartPacking {
   glm::ivec2 size{0};               // [0, size) holds every covered texel
-  std::vector<glm::ivec2> corners;  // per chart: where its footprint's (0, 0) goes
-  std::vector<bool> turned;         // per chart: turned by 180 degrees (x -> columns - x, ...)
+  std::vector<glm::ivec2> corners;  // per chart: where its (chosen) footprint's (0, 0) goes
+  std::vector<bool> quarter;        // per chart: its quarter-turned footprint was used
+  std::vector<bool> turned;         // per chart: that footprint turned by 180 degrees
+                                    // (x -> columns - x, y -> rows - y)
 };
 
-// Packs `charts` with at least `gutter` empty texels between the covered texels of any two
-// (Chebyshev distance; none between a chart and the rectangle's border). Tries bin widths
-// from the widest chart to a few times the side of the charts' area and keeps the smallest
-// rectangle, scored as if widened to an aspect ratio of at most 2. Charts go in order of
-// height, then width (descending), then index.
-ChartPacking packCharts(const std::vector<ChartFootprint>& charts, int gutter);
+// Packs charts with at least `gutter` empty texels between the covered texels of any two
+// (Chebyshev distance; none between a chart and the rectangle's border). `upright[i]` is
+// chart i's footprint, `quarter[i]` (optional: empty = upright only) the footprint of the
+// same chart turned by 90 degrees; each is also tried turned by 180 degrees. Tries bin
+// widths from the widest chart to a few times the side of the charts' area and keeps the
+// smallest rectangle, scored as if widened to an aspect ratio of at most 2. Charts go in
+// order of height, then width (descending), then index.
+ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
+                        const std::vector<ChartFootprint>& quarter, int gutter);
 
 }  // namespace kiln

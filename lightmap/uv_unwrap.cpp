@@ -658,6 +658,10 @@ void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vecto
   charts = std::move(kept);
 }
 
+// A point of a chart with extent e turned by 90 degrees counter-clockwise, (x, y) ->
+// (e.y - y, x): the turned chart's extent is (e.y, e.x).
+dvec2 quarterTurn(dvec2 p, dvec2 e) { return dvec2(e.y - p.y, p.x); }
+
 // Andrew's monotone chain convex hull, counter-clockwise, without collinear points.
 std::vector<dvec2> convexHull(std::vector<dvec2> p) {
   std::sort(p.begin(), p.end(),
@@ -770,7 +774,8 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   // Charts in texels at the expected density, packed by their shape (chart_packer.h) with
   // the gutter between their covered texels.
   const double d = settings.texelsPerUnit;
-  std::vector<ChartFootprint> footprints(charts.size());
+  std::vector<ChartFootprint> footprints(charts.size()), quarters(charts.size());
+  std::vector<dvec2> extents(charts.size());
   std::vector<bool> shrunk(charts.size(), false);
   for (size_t i = 0; i < charts.size(); ++i) {
     dvec2 extent = normalizeChart(m, charts[i]);
@@ -782,6 +787,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
       extent *= scale;
       shrunk[i] = true;
     }
+    extents[i] = extent;
     std::vector<std::array<dvec2, 3>> tris;
     tris.reserve(charts[i].triangles.size());
     for (uint32_t t : charts[i].triangles) {
@@ -790,14 +796,18 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
                       c.uv[c.local(m.tris[t][2])] * d});
     }
     footprints[i] = chartFootprint(tris, extent * d);
+    for (auto& tri : tris)
+      for (dvec2& p : tri) p = quarterTurn(p, extent * d);
+    quarters[i] = chartFootprint(tris, dvec2(extent.y, extent.x) * d);
   }
-  const ChartPacking packed = packCharts(footprints, settings.gutterTexels);
-  // A chart's texel position: its corner plus its own texel coordinates, turned by 180
-  // degrees about the centre of its footprint when the packer turned it (a rotation: the
-  // orientation is kept).
+  const ChartPacking packed = packCharts(footprints, quarters, settings.gutterTexels);
+  // A chart's texel position: its corner plus its own texel coordinates, turned by 90
+  // and/or 180 degrees as the packer chose (rotations: the orientation is kept).
   auto texelPosition = [&](uint32_t chart, dvec2 uvWorld) {
-    const ChartFootprint& f = footprints[chart];
-    const dvec2 p = uvWorld * d + f.offset;  // footprint coordinates (chart_packer.h)
+    dvec2 p = uvWorld * d;
+    if (packed.quarter[chart]) p = quarterTurn(p, extents[chart] * d);
+    const ChartFootprint& f = packed.quarter[chart] ? quarters[chart] : footprints[chart];
+    p += f.offset;  // footprint coordinates (chart_packer.h)
     return dvec2(packed.corners[chart]) +
            (packed.turned[chart] ? dvec2(f.columns, f.rows) - p : p);
   };

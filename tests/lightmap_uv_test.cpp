@@ -393,7 +393,9 @@ TEST(LightmapUv, SealedFacesGetAtMostATexel) {
   // texel across, which the conservative rasterizer (texel_raster.h) gives at most 3 x 3.
   EXPECT_GE(bottomBefore, 1024u);
   EXPECT_LE(bottomAfter, 9u);
-  EXPECT_LT(after, before - 1000);
+  // The other five faces keep their texels (within what packing changes at chart borders).
+  EXPECT_NEAR(double(after - bottomAfter), double(before - bottomBefore),
+              0.05 * double(before - bottomBefore));
   std::printf("box on floor: sealed bottom %zu of %zu texels without shrinking, %zu of %zu "
               "with\n",
               bottomBefore, before, bottomAfter, after);
