@@ -44,10 +44,12 @@ AreaPair areas(const Object& o) {
 // whole 4 x 4 blocks), or maxSize itself.
 constexpr int kPageAlign = 4;
 
-// The smallest page (by area; ties: the squarer, then the narrower) that holds `items` in
-// order, padded as packPage pads: for each candidate width (multiples of kPageAlign from the
-// items' area bound up to maxSize, at most 128), the skyline's used height gives the height.
-glm::ivec2 smallestPage(int maxSize, int padding, const std::vector<uint32_t>& items,
+// The smallest page (by area; ties: the squarer, then the earlier order) that holds `items`,
+// padded as packPage pads: for each of four insertion orders (the given one, then by width,
+// by area and by longer side, all descending with ties by index) and each candidate width
+// (multiples of kPageAlign from the items' area bound up to maxSize, at most 128), the
+// skyline's used height gives the height. `items` is left in the order that won.
+glm::ivec2 smallestPage(int maxSize, int padding, std::vector<uint32_t>& items,
                         const std::vector<glm::ivec2>& sizes) {
   double area = 0.0;
   int widest = 1;
@@ -64,10 +66,30 @@ glm::ivec2 smallestPage(int maxSize, int padding, const std::vector<uint32_t>& i
       candidateWidths(std::max(widest, int(std::sqrt(area) / 2.0)), maxSize, kPageAlign, 128);
   std::vector<int> bins;
   for (int w : widths) bins.push_back(w - padding);
-  const auto best = packSmallest(padded, items, bins, maxSize - padding, [&](int w, int used) {
-    return glm::ivec2(w + padding, align(used + padding));
-  });
-  return best ? best->page : glm::ivec2(maxSize);
+  auto key = [&](int order, uint32_t i) -> int64_t {
+    const glm::ivec2 s = sizes[i];
+    return order == 1 ? s.x : order == 2 ? int64_t(s.x) * s.y : std::max(s.x, s.y);
+  };
+  glm::ivec2 best(maxSize);
+  std::vector<uint32_t> bestOrder = items;
+  for (int order = 0; order < 4; ++order) {
+    std::vector<uint32_t> trial = items;
+    if (order > 0)
+      std::sort(trial.begin(), trial.end(), [&](uint32_t a, uint32_t b) {
+        return key(order, a) != key(order, b) ? key(order, a) > key(order, b) : a < b;
+      });
+    const auto packed = packSmallest(padded, trial, bins, maxSize - padding, [&](int w, int used) {
+      return glm::ivec2(w + padding, align(used + padding));
+    });
+    if (!packed) continue;
+    const int64_t a = int64_t(packed->page.x) * packed->page.y, b = int64_t(best.x) * best.y;
+    if (a < b || (a == b && order == 0)) {
+      best = packed->page;
+      bestOrder = trial;
+    }
+  }
+  items = bestOrder;
+  return best;
 }
 
 // Packs `items` (indices into `sizes`, in order) into a bin of page size `page` with padding

@@ -114,7 +114,7 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // Pages: objects are sorted by height, then width (descending), then object index, and
 // filled into maxSize pages in that order, a new page when one is full; each page is then
 // shrunk to the smallest size (by area; sides multiples of 4 as block compression needs, or
-// maxSize) that holds its objects in the same order. Pages need not be powers of two: every
+// maxSize) that holds its objects, inserted in that order or by width, area or longer side. Pages need not be powers of two: every
 // GPU API kiln targets samples such textures (lightmaps are not mipmapped), and
 // power-of-two pages left up to half of a page empty. Deterministic.
 // Objects too small for a useful lightmap (tooSmallForLightmap) get no page and probeLit,

@@ -181,7 +181,7 @@ TEST(LightmapAtlas, EqualSquaresWithoutPaddingFillTheirPageExactly) {
   for (const int count : {16, 12}) {
     Scene scene;
     test::addMaterial(scene, test::lambert(vec3(0.5f)));
-    for (int i = 0; i < count; ++i) addFloor(scene, "q" + std::to_string(i), 1.0f, 1.0f, float(i));
+    for (int i = 0; i < count; ++i) addFloor(scene, "quad" + std::to_string(i), 1.0f, 1.0f, float(i));
     AtlasSettings settings;
     settings.resolution = 8.0f;
     settings.padding = 0;
