@@ -107,11 +107,17 @@ bool packPage(glm::ivec2 page, int padding, const std::vector<uint32_t>& items,
   return true;
 }
 
+// Maps [lo, hi] onto the texel rectangle inset by kInset texels on every side: pages need not
+// be powers of two, so 1 / width is not exact in float, and a UV on the rectangle's edge could
+// otherwise land a hair beyond it, where the conservative rasterizer would give a texel of
+// the padding a sliver of the object.
+constexpr double kInset = 5e-4;
+
 vec4 scaleOffsetFor(vec2 lo, vec2 hi, glm::ivec2 texelMin, glm::ivec2 texelSize, AtlasPage page) {
-  const double sx = double(texelSize.x) / ((double(hi.x) - lo.x) * page.width);
-  const double sy = double(texelSize.y) / ((double(hi.y) - lo.y) * page.height);
-  const double ox = double(texelMin.x) / page.width - lo.x * sx;
-  const double oy = double(texelMin.y) / page.height - lo.y * sy;
+  const double sx = (texelSize.x - 2.0 * kInset) / ((double(hi.x) - lo.x) * page.width);
+  const double sy = (texelSize.y - 2.0 * kInset) / ((double(hi.y) - lo.y) * page.height);
+  const double ox = (texelMin.x + kInset) / page.width - lo.x * sx;
+  const double oy = (texelMin.y + kInset) / page.height - lo.y * sy;
   return vec4(float(sx), float(sy), float(ox), float(oy));
 }
 

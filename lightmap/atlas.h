@@ -7,9 +7,11 @@
 //
 // Frames: texel (x, y) of a W x H page covers atlas UV [x, x+1]/W x [y, y+1]/H, with (0, 0)
 // the top-left corner = the first image row (glTF texture coordinates, MISSION.md
-// "Conventions"). scaleOffset maps the UV1 bounding rectangle [u0, u1] x [v0, v1] exactly onto
-// the object's texel rectangle [x, x + w] x [y, y + h] (texel edges, no half-texel inset):
-// the rasterizer is conservative, so border texels partly covered still get samples.
+// "Conventions"). scaleOffset maps the UV1 bounding rectangle [u0, u1] x [v0, v1] onto the
+// object's texel rectangle [x, x + w] x [y, y + h] (texel edges, no half-texel inset; only
+// 1/2000 texel, so that float rounding on pages that are not powers of two never reaches
+// outside): the rasterizer is conservative, so border texels partly covered still get
+// samples.
 #pragma once
 
 #include <atomic>

@@ -36,6 +36,9 @@ double cross2(dvec2 a, dvec2 b) { return a.x * b.y - a.y * b.x; }
 
 // Largest ratio between a triangle's texel density and its chart's that LSCM may leave.
 constexpr double kMaxAreaDistortion = 2.0;
+// Largest ratio between a UV triangle's two singular values (1 = conformal) a chart may
+// have; LSCM over a whole chart stays near 1 (1.09 on a sphere), merges may not.
+constexpr double kMaxAnisotropy = 1.75;
 // A chart that fails (fold, overlap, distortion) is regrown with its cone angle times this:
 // gentler than halving, which cut curved meshes (a teapot) into several times the charts
 // they need.
@@ -460,7 +463,8 @@ double coneCos(const WeldedMesh& m, const Chart& c, dvec3 mean) {
 
 // Whether the chart's texel density varies by at most kMaxAreaDistortion between triangles
 // and its mean (LSCM is conformal but not area-preserving: measured at most 1.13 on
-// 45-degree cones).
+// 45-degree cones, 1.56 on 60-degree ones) and no triangle is stretched more than
+// kMaxAnisotropy in one direction than in the other.
 bool distortionWithinBound(const WeldedMesh& m, const Chart& c) {
   double uvSum = 0.0, worldSum = 0.0;
   std::vector<double> uvArea(c.triangles.size());
@@ -475,6 +479,18 @@ bool distortionWithinBound(const WeldedMesh& m, const Chart& c) {
   for (size_t i = 0; i < c.triangles.size(); ++i) {
     const double ratio = (uvArea[i] / m.areas[c.triangles[i]]) * (worldSum / uvSum);
     if (!(ratio <= kMaxAreaDistortion && ratio >= 1.0 / kMaxAreaDistortion)) return false;
+    // Anisotropy s1 / s2 of the map's Jacobian (a merge solved onto a fixed map is less
+    // conformal than LSCM over the whole chart).
+    const uint32_t t = c.triangles[i];
+    const std::array<dvec2, 3> z = localTriangle(m, t);
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    const glm::dmat2 j = glm::dmat2(u1 - u0, u2 - u0) * glm::inverse(glm::dmat2(z[1] - z[0], z[2] - z[0]));
+    const double e = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
+    const double det = std::abs(glm::determinant(j));
+    const double root = std::sqrt(std::max(0.0, e * e - 4.0 * det * det));
+    // s1^2 = (e + root) / 2, s2^2 = (e - root) / 2: s1 / s2 <= a  <=>  (e + root) <= a^2 (e - root)
+    if (!(e + root <= kMaxAnisotropy * kMaxAnisotropy * (e - root))) return false;
   }
   return true;
 }
