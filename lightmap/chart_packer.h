@@ -5,10 +5,10 @@
 // or a curved strip leaves half of it empty). Here every chart is described per texel column
 // by the rows it covers (its lowest and highest covered row, conservatively: every texel the
 // chart touches), and charts are dropped into a height map one after the other, each at the
-// column where its top ends lowest (ties: leftmost), in its orientation or turned by 180
-// degrees, so that a chart nests into the hollows the charts below it leave ("Tetris"
-// packing over column profiles, as in B. Lévy et al. 2002, section 5, with the 180-degree
-// turn of xatlas). The bin width is chosen among candidates to give the smallest rectangle.
+// column where its top ends lowest (ties: leftmost), in its orientation or turned by 90, 180
+// or 270 degrees, so that a chart nests into the hollows the charts below it leave ("Tetris"
+// packing over column profiles, as in B. Lévy et al. 2002, section 5, with the quarter turns
+// of xatlas). The bin width is chosen among candidates to give the smallest rectangle.
 // Integer texel coordinates; deterministic.
 #pragma once
 
