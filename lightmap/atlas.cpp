@@ -1,5 +1,5 @@
-// atlas.cpp: lightmap atlas packing (texel density rule, skyline packing into power-of-two
-// pages) and its manifest form for --lock-atlas.
+// atlas.cpp: lightmap atlas packing (texel density rule, skyline packing into pages shrunk
+// to the smallest multiple-of-4 size) and its manifest form for --lock-atlas.
 #include "lightmap/atlas.h"
 
 #include <algorithm>
@@ -40,21 +40,56 @@ AreaPair areas(const Object& o) {
   return a;
 }
 
-// Candidate page sizes no larger than maxSize, smallest area first: powers of two w x w and
-// w x w/2, and maxSize x maxSize (and x its previous size) when maxSize is no power of two.
-std::vector<glm::ivec2> pageSizes(int maxSize) {
-  std::vector<int> sides;
-  for (int s = 1; s < maxSize; s *= 2) sides.push_back(s);
-  sides.push_back(maxSize);
-  std::vector<glm::ivec2> sizes;
-  for (size_t i = 0; i < sides.size(); ++i) {
-    if (i > 0) sizes.push_back(glm::ivec2(sides[i], sides[i - 1]));
-    sizes.push_back(glm::ivec2(sides[i], sides[i]));
+// Page sides are multiples of this (block-compressed formats such as BC6H and ASTC 4x4 need
+// whole 4 x 4 blocks), or maxSize itself.
+constexpr int kPageAlign = 4;
+
+// The smallest page (by area; ties: the squarer, then the earlier order) that holds `items`,
+// padded as packPage pads: for each of four insertion orders (the given one, then by width,
+// by area and by longer side, all descending with ties by index) and each candidate width
+// (multiples of kPageAlign from the items' area bound up to maxSize, at most 128), the
+// skyline's used height gives the height. `items` is left in the order that won.
+glm::ivec2 smallestPage(int maxSize, int padding, std::vector<uint32_t>& items,
+                        const std::vector<glm::ivec2>& sizes) {
+  double area = 0.0;
+  int widest = 1;
+  std::vector<glm::ivec2> padded(sizes.size());
+  for (uint32_t i : items) {
+    padded[i] = sizes[i] + glm::ivec2(padding);
+    area += double(padded[i].x) * double(padded[i].y);
+    widest = std::max(widest, padded[i].x + padding);
   }
-  std::stable_sort(sizes.begin(), sizes.end(), [](glm::ivec2 a, glm::ivec2 b) {
-    return int64_t(a.x) * a.y < int64_t(b.x) * b.y;
-  });
-  return sizes;
+  auto align = [&](int x) {
+    return std::min(maxSize, (x + kPageAlign - 1) / kPageAlign * kPageAlign);
+  };
+  const std::vector<int> widths =
+      candidateWidths(std::max(widest, int(std::sqrt(area) / 2.0)), maxSize, kPageAlign, 128);
+  std::vector<int> bins;
+  for (int w : widths) bins.push_back(w - padding);
+  auto key = [&](int order, uint32_t i) -> int64_t {
+    const glm::ivec2 s = sizes[i];
+    return order == 1 ? s.x : order == 2 ? int64_t(s.x) * s.y : std::max(s.x, s.y);
+  };
+  glm::ivec2 best(maxSize);
+  std::vector<uint32_t> bestOrder = items;
+  for (int order = 0; order < 4; ++order) {
+    std::vector<uint32_t> trial = items;
+    if (order > 0)
+      std::sort(trial.begin(), trial.end(), [&](uint32_t a, uint32_t b) {
+        return key(order, a) != key(order, b) ? key(order, a) > key(order, b) : a < b;
+      });
+    const auto packed = packSmallest(padded, trial, bins, maxSize - padding, [&](int w, int used) {
+      return glm::ivec2(w + padding, align(used + padding));
+    });
+    if (!packed) continue;
+    const int64_t a = int64_t(packed->page.x) * packed->page.y, b = int64_t(best.x) * best.y;
+    if (a < b || (a == b && order == 0)) {
+      best = packed->page;
+      bestOrder = trial;
+    }
+  }
+  items = bestOrder;
+  return best;
 }
 
 // Packs `items` (indices into `sizes`, in order) into a bin of page size `page` with padding
@@ -72,11 +107,17 @@ bool packPage(glm::ivec2 page, int padding, const std::vector<uint32_t>& items,
   return true;
 }
 
+// Maps [lo, hi] onto the texel rectangle inset by kInset texels on every side: pages need not
+// be powers of two, so 1 / width is not exact in float, and a UV on the rectangle's edge could
+// otherwise land a hair beyond it, where the conservative rasterizer would give a texel of
+// the padding a sliver of the object.
+constexpr double kInset = 5e-4;
+
 vec4 scaleOffsetFor(vec2 lo, vec2 hi, glm::ivec2 texelMin, glm::ivec2 texelSize, AtlasPage page) {
-  const double sx = double(texelSize.x) / ((double(hi.x) - lo.x) * page.width);
-  const double sy = double(texelSize.y) / ((double(hi.y) - lo.y) * page.height);
-  const double ox = double(texelMin.x) / page.width - lo.x * sx;
-  const double oy = double(texelMin.y) / page.height - lo.y * sy;
+  const double sx = (texelSize.x - 2.0 * kInset) / ((double(hi.x) - lo.x) * page.width);
+  const double sy = (texelSize.y - 2.0 * kInset) / ((double(hi.y) - lo.y) * page.height);
+  const double ox = (texelMin.x + kInset) / page.width - lo.x * sx;
+  const double oy = (texelMin.y + kInset) / page.height - lo.y * sy;
   return vec4(float(sx), float(sy), float(ox), float(oy));
 }
 
@@ -85,6 +126,17 @@ vec4 scaleOffsetFor(vec2 lo, vec2 hi, glm::ivec2 texelMin, glm::ivec2 texelSize,
 bool isLightmapped(const Object& object) {
   return object.settings.isStatic && object.settings.scaleInLightmap > 0.0f &&
          object.settings.receiveGI == ReceiveGI::Lightmaps && !object.triangles.empty();
+}
+
+double lightmapTexels(const Object& object, float resolution) {
+  const double density = double(resolution) * object.settings.scaleInLightmap;
+  double area = 0.0;
+  for (uint32_t t = 0; t < object.triangles.size(); ++t) area += object.triangleArea(t);
+  return density * density * area;
+}
+
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels) {
+  return minTexels > 0.0f && lightmapTexels(object, resolution) < double(minTexels);
 }
 
 std::pair<vec2, vec2> uv1Bounds(const Object& object) {
@@ -114,6 +166,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   if (!(settings.resolution > 0.0f) || !std::isfinite(settings.resolution))
     return Error{"lightmap resolution must be > 0 texels per unit (got " +
                  std::to_string(settings.resolution) + ")"};
+  if (!(settings.minObjectTexels >= 0.0f) || !std::isfinite(settings.minObjectTexels))
+    return Error{"minObjectTexels must be a finite number >= 0 (got " +
+                 std::to_string(settings.minObjectTexels) + ")"};
   if (settings.maxSize < 1 + 2 * p)
     return Error{"lightmap maxSize " + std::to_string(settings.maxSize) +
                  " cannot hold one texel with padding " + std::to_string(p) +
@@ -127,7 +182,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
                    " objects, the scene " + std::to_string(scene.objects.size())};
     for (size_t i = 0; i < scene.objects.size(); ++i) {
       const int page = locked.objects[i].lightmapIndex;
-      if (isLightmapped(scene.objects[i]) != (page >= 0))
+      if (isLightmapped(scene.objects[i]) != (page >= 0 || locked.objects[i].probeLit))
         return Error{"locked atlas: " + describe(scene.objects[i]) +
                      (page >= 0 ? " has a lightmap in the locked atlas but is not lightmapped"
                                 : " is lightmapped but has no lightmap in the locked atlas")};
@@ -146,9 +201,15 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   std::vector<uint32_t> lightmapped;
   std::vector<glm::ivec2> sizes(scene.objects.size(), glm::ivec2(0));
   std::vector<std::pair<vec2, vec2>> bounds(scene.objects.size());
+  std::vector<std::string> probeLit;
   for (uint32_t i = 0; i < scene.objects.size(); ++i) {
     const Object& o = scene.objects[i];
     if (!isLightmapped(o)) continue;
+    if (tooSmallForLightmap(o, settings.resolution, settings.minObjectTexels)) {
+      layout.objects[i].probeLit = true;
+      probeLit.push_back("'" + o.name + "'");
+      continue;
+    }
     if (o.uv1.size() != o.positions.size())
       return Error{describe(o) + ": has no lightmap UVs (TEXCOORD_1); generate them first"};
     bounds[i] = uv1Bounds(o);
@@ -158,7 +219,9 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
       return Error{describe(o) + ": its lightmap UVs (TEXCOORD_1) have zero area"};
     // Texels per UV unit so that the triangles get (resolution x scale)^2 x world area texels.
     const double density = double(settings.resolution) * o.settings.scaleInLightmap;
-    double k = density * std::sqrt(a.world / a.uv);
+    const bool generated = i < settings.worldPerUv.size() && settings.worldPerUv[i] > 0.0;
+    const double worldPerUv = generated ? settings.worldPerUv[i] : std::sqrt(a.world / a.uv);
+    double k = density * worldPerUv;
     const double eu = double(hi.x) - lo.x, ev = double(hi.y) - lo.y;
     glm::ivec2 size(texelsUp(k * eu), texelsUp(k * ev));
     if (std::max(size.x, size.y) > limit) {
@@ -167,13 +230,24 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
       std::ostringstream w;
       w << describe(o) << ": lightmap scaled down to " << size.x << " x " << size.y
         << " texels to fit maxSize " << settings.maxSize << " with padding " << p << " ("
-        << k * std::sqrt(a.uv / a.world) << " instead of " << density << " texels per unit)";
+        << k / worldPerUv << " instead of " << density << " texels per unit)";
       layout.warnings.push_back(w.str());
     }
     sizes[i] = size;
     layout.objects[i].texelSize = size;
-    layout.objects[i].texelsPerUnit = float(k * std::sqrt(a.uv / a.world));
+    layout.objects[i].texelsPerUnit = float(k / worldPerUv);
     lightmapped.push_back(i);
+  }
+
+  if (!probeLit.empty()) {
+    std::ostringstream w;
+    w << probeLit.size() << " object(s) would get fewer than " << settings.minObjectTexels
+      << " lightmap texels at " << settings.resolution
+      << " texels per unit and are lit by probes instead (manifest: \"probeLit\"): ";
+    const size_t shown = std::min<size_t>(probeLit.size(), 20);
+    for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << probeLit[k];
+    if (shown < probeLit.size()) w << " and " << probeLit.size() - shown << " more";
+    layout.warnings.push_back(w.str());
   }
 
   // The texel budget, before packing and before anything the size of a page is allocated:
@@ -193,7 +267,6 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   for (size_t j = 0; j < lightmapped.size(); ++j) sortKey[j] = sizes[lightmapped[j]];
   std::vector<uint32_t> remaining;
   for (uint32_t j : packingOrder(sortKey)) remaining.push_back(lightmapped[j]);
-  const std::vector<glm::ivec2> candidates = pageSizes(settings.maxSize);
   std::vector<glm::ivec2> corners(scene.objects.size());
   Progress progress("atlas", lightmapped.size(), "objects",
                     settings.showProgress && !lightmapped.empty());
@@ -209,14 +282,11 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     }
     if (members.empty())  // cannot happen: sizes are clamped to fit an empty page
       return Error{describe(scene.objects[remaining.front()]) + ": does not fit a lightmap page"};
-    AtlasPage page;
-    for (glm::ivec2 c : candidates)
-      if (packPage(c, p, members, sizes, corners)) {
-        page.width = c.x;
-        page.height = c.y;
-        break;
-      }
-    assert(page.width > 0);
+    const glm::ivec2 best = smallestPage(settings.maxSize, p, members, sizes);
+    const bool packed = packPage(best, p, members, sizes, corners);
+    assert(packed);  // smallestPage found it by this very packing (or maxSize, which holds all)
+    (void)packed;
+    AtlasPage page{best.x, best.y};
     const int index = int(layout.pages.size());
     layout.pages.push_back(page);
     for (uint32_t i : members) {
@@ -230,7 +300,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     progress.advance(members.size());
   }
   progress.finish();
-  // Pages are powers of two, so they may exceed the objects' area (up to about 4x).
+  // Pages may exceed the objects' area (skyline waste, alignment to 4 texels).
   if (Status budget = checkTexelBudget(layout.pages, "lightmap pages"); !budget)
     return Error{budget.error()};
   return layout;
@@ -270,6 +340,12 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
       return Error{at + ": nodeIndex " + std::to_string(mo.nodeIndex) + " is '" + mo.node +
                    "' in the manifest but '" + o.name + "' in the scene"};
     const int page = mo.lightmapIndex;
+    if (mo.probeLit) {
+      if (!isLightmapped(o))
+        return Error{at + ": " + describe(o) +
+                     " is probe-lit in the manifest but is not lightmapped in the scene"};
+      layout.objects[i].probeLit = true;
+    }
     if (page < 0) continue;
     if (!isLightmapped(o))
       return Error{at + ": " + describe(o) +
@@ -298,7 +374,8 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
     ao.texelsPerUnit = ar.world > 0.0 ? float(s.x * dims.x * std::sqrt(ar.uv / ar.world)) : 0.0f;
   }
   for (uint32_t i = 0; i < scene.objects.size(); ++i)
-    if (isLightmapped(scene.objects[i]) && layout.objects[i].lightmapIndex < 0)
+    if (isLightmapped(scene.objects[i]) && layout.objects[i].lightmapIndex < 0 &&
+        !layout.objects[i].probeLit)
       return Error{where + ": " + describe(scene.objects[i]) +
                    " is lightmapped but the manifest gives it no lightmap"};
   return layout;

@@ -7,9 +7,11 @@
 //
 // Frames: texel (x, y) of a W x H page covers atlas UV [x, x+1]/W x [y, y+1]/H, with (0, 0)
 // the top-left corner = the first image row (glTF texture coordinates, MISSION.md
-// "Conventions"). scaleOffset maps the UV1 bounding rectangle [u0, u1] x [v0, v1] exactly onto
-// the object's texel rectangle [x, x + w] x [y, y + h] (texel edges, no half-texel inset):
-// the rasterizer is conservative, so border texels partly covered still get samples.
+// "Conventions"). scaleOffset maps the UV1 bounding rectangle [u0, u1] x [v0, v1] onto the
+// object's texel rectangle [x, x + w] x [y, y + h] (texel edges, no half-texel inset; only
+// 1/2000 texel, so that float rounding on pages that are not powers of two never reaches
+// outside): the rasterizer is conservative, so border texels partly covered still get
+// samples.
 #pragma once
 
 #include <atomic>
@@ -38,6 +40,9 @@ struct AtlasObject {
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // (sx, sy, ox, oy)
   // Texels per world unit the object actually got (below resolution x scale when clamped).
   float texelsPerUnit = 0.0f;
+  // Lightmapped by its settings, but its surface would get fewer than minObjectTexels
+  // texels: lit by probes instead (Unity's receiveGI = probes), no page (lightmapIndex -1).
+  bool probeLit = false;
 };
 
 struct AtlasLayout {
@@ -54,8 +59,33 @@ inline constexpr uint64_t kMaxLightmapTexels = uint64_t(1) << 27;
 // Success when `pages` hold at most kMaxLightmapTexels; else an error starting with `what`.
 Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what);
 
+// Default of AtlasSettings::minObjectTexels, UnwrapSettings::minObjectTexels and kiln bake's
+// --min-object-texels: 0, every lightmapped object gets a lightmap. Off by default because
+// one threshold does not fit every resolution (quick bakes at 2-8 texels per unit would lose
+// whole rooms); 64-128 suits bakes at 25-64 texels per unit, where a smaller lightmap holds
+// little more than the one colour the probes around the object give as well (with
+// direction), in charts of a texel or two that cost more gutter than they hold.
+inline constexpr float kMinObjectTexels = 0.0f;
+
+// The texels an object's surface gets at `resolution` (Unity's rule, before packing):
+// (resolution x scaleInLightmap)^2 x its world area.
+double lightmapTexels(const Object& object, float resolution);
+
+// Whether a lightmapped object (isLightmapped) is lit by probes instead because
+// lightmapTexels < minTexels.
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels);
+
 struct AtlasSettings {
   float resolution = 10.0f;  // texels per world unit (before scaleInLightmap)
+  // Lightmapped objects whose surface would get fewer texels than this are lit by probes
+  // instead (AtlasObject::probeLit), named in a warning. 0 = every object gets a lightmap.
+  float minObjectTexels = kMinObjectTexels;
+  // Per scene object (or empty): the world units per UV unit its generated UVs were made
+  // with (UnwrapResult::worldPerUv), 0 = not generated. Such an object gets exactly
+  // resolution x scaleInLightmap x worldPerUv texels per UV unit, the density its charts
+  // were packed for, instead of the area rule below (which shrunk charts of sealed surfaces
+  // would skew).
+  std::vector<double> worldPerUv;
   int padding = 2;           // texels kept empty around every object (see packAtlas)
   int maxSize = 1024;        // largest page width and height, texels
   // When set, packAtlas checks it against the scene and returns it instead of packing
@@ -76,7 +106,8 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 
 // Packs every lightmapped object of the scene. Size rule: an object with world area A, UV1
 // triangle area A_uv (sum of |UV triangle areas|) and UV1 bounding rectangle of extent
-// (eu, ev) gets k = resolution x scaleInLightmap x sqrt(A / A_uv) texels per UV unit, so its
+// (eu, ev) gets k = resolution x scaleInLightmap x sqrt(A / A_uv) texels per UV unit (with
+// generated UVs: resolution x scaleInLightmap x settings.worldPerUv), so its
 // triangles cover (resolution x scale)^2 x A texels, and a rectangle of
 // w = ceil(k eu) x h = ceil(k ev) texels (at least 1). When max(w, h) > maxSize - 2 padding,
 // k is scaled down to fit and a warning names the object.
@@ -84,15 +115,20 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // objects are at least `padding` texels apart, and at least `padding` from the page border).
 // Pages: objects are sorted by height, then width (descending), then object index, and
 // filled into maxSize pages in that order, a new page when one is full; each page is then
-// shrunk to the smallest power-of-two size (w x w or w x w/2, or maxSize itself when it is not
-// a power of two) that holds its objects in the same order. Deterministic.
+// shrunk to the smallest size (by area; sides multiples of 4 as block compression needs, or
+// maxSize) that holds its objects, inserted in that order or by width, area or longer side. Pages need not be powers of two: every
+// GPU API kiln targets samples such textures (lightmaps are not mipmapped), and
+// power-of-two pages left up to half of a page empty. Deterministic.
+// Objects too small for a useful lightmap (tooSmallForLightmap) get no page and probeLit,
+// and one warning names them; they need no uv1.
 // Errors name the setting (maxSize < 1 + 2 padding, resolution <= 0) or the object (no uv1,
 // zero-area uv1).
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);
 
 // The manifest's atlas part (manifest.h writes it): {"lightmaps": [{"index", "width",
 // "height"}], "objects": [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox,
-// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1.
+// oy], "unityScaleOffset"}]}. Objects without a lightmap are listed with lightmapIndex -1,
+// and "probeLit": true when they are lit by probes for being too small.
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene);
 
 // Reads a layout back from a manifest (checked by readManifest, ManifestUse::kAtlas; errors
@@ -101,7 +137,7 @@ Result<AtlasLayout> atlasFromManifest(const nlohmann::json& manifest, const Scen
 
 // The layout of a manifest that readManifest returned, for `scene`: objects are matched by
 // nodeIndex and their node name must agree; every lightmapped scene object needs an entry
-// with a page, and entries with a page must be lightmapped objects. Texel rectangles are
+// with a page or probeLit, and entries with a page must be lightmapped objects. Texel rectangles are
 // recovered from scaleOffset and the objects' UV1 bounds and must lie inside their page.
 // Errors start with `where` (the manifest's file) and name the object.
 Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& scene,

@@ -639,6 +639,7 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   // Stage 1: UVs.
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
+  unwrap.minObjectTexels = settings.minObjectTexels;
   unwrap.showProgress = showProgress;
   unwrap.cancel = cancel;
   auto unwraps = generateMissingLightmapUvs(result.scene, settings.resolution, unwrap);
@@ -651,6 +652,9 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   atlas.resolution = settings.resolution;
   atlas.padding = settings.padding;
   atlas.maxSize = settings.maxSize;
+  atlas.minObjectTexels = settings.minObjectTexels;
+  for (const std::optional<UnwrapResult>& u : result.unwraps)
+    atlas.worldPerUv.push_back(u ? u->worldPerUv : 0.0);
   atlas.locked = settings.lockedAtlas;
   atlas.showProgress = showProgress;
   atlas.cancel = cancel;

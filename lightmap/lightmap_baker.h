@@ -42,6 +42,8 @@ struct LightmapBakeSettings {
   float resolution = 10.0f;  // texels per world unit, before each object's scaleInLightmap
   int padding = 2;           // texels
   int maxSize = 1024;        // page width/height limit, texels
+  // Objects whose surface would get fewer texels are lit by probes instead (atlas.h).
+  float minObjectTexels = kMinObjectTexels;
   std::optional<AtlasLayout> lockedAtlas;  // --lock-atlas
   // Sampling.
   int samplesPerTexel = 256;  // paths per texel (split over the supersamples)

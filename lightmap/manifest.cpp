@@ -148,7 +148,8 @@ Manifest atlasManifest(const AtlasLayout& layout, const Scene& scene) {
   for (size_t i = 0; i < layout.objects.size() && i < scene.objects.size(); ++i) {
     const AtlasObject& o = layout.objects[i];
     m.objects.push_back(
-        {scene.objects[i].name, scene.objects[i].nodeIndex, o.lightmapIndex, o.scaleOffset});
+        {scene.objects[i].name, scene.objects[i].nodeIndex, o.lightmapIndex, o.scaleOffset,
+         o.probeLit});
   }
   return m;
 }
@@ -198,6 +199,7 @@ Json manifestJson(const Manifest& m) {
                        {"lightmapIndex", o.lightmapIndex},
                        {"scaleOffset", {so.x, so.y, so.z, so.w}},
                        {"unityScaleOffset", {uso.x, uso.y, uso.z, uso.w}}});
+    if (o.probeLit) objects.back()["probeLit"] = true;
   }
   j["objects"] = std::move(objects);
   j["settings"] = m.settings;
@@ -310,6 +312,13 @@ Result<Manifest> readManifest(const Json& j, const std::string& where, ManifestU
     if (e.contains("scaleOffset") || o.lightmapIndex >= 0)
       if (!e.contains("scaleOffset") || !readFloats(e["scaleOffset"], &o.scaleOffset.x, 4))
         return fail(at + ".scaleOffset", "expected 4 finite numbers [sx, sy, ox, oy]");
+    if (e.contains("probeLit")) {
+      if (!e["probeLit"].is_boolean())
+        return fail(at + ".probeLit", "expected true or false");
+      o.probeLit = e["probeLit"].get<bool>();
+      if (o.probeLit && o.lightmapIndex >= 0)
+        return fail(at + ".probeLit", "a probe-lit object has lightmapIndex -1");
+    }
     m.objects.push_back(std::move(o));
   }
 

@@ -47,6 +47,10 @@ struct ManifestObject {
   int nodeIndex = -1;                        // the glTF node index, >= 0
   int lightmapIndex = -1;                    // page, or -1: no lightmap
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // (sx, sy, ox, oy), finite
+  // Lightmapped by its settings but too small for a useful lightmap at the bake's resolution
+  // (atlas.h, minObjectTexels): lit by probes instead, lightmapIndex -1. Written as
+  // "probeLit": true, and only then.
+  bool probeLit = false;
 };
 
 // One scene light and what the bake's lighting mode did with it (docs/mixed_lighting.md).

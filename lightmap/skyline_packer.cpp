@@ -61,6 +61,21 @@ std::optional<glm::ivec2> SkylinePacker::insert(int width, int height) {
   return glm::ivec2(bestX, bestY);
 }
 
+int SkylinePacker::usedHeight() const {
+  int y = 0;
+  for (const Segment& s : skyline_) y = std::max(y, s.y);
+  return y;
+}
+
+std::vector<int> candidateWidths(int lo, int hi, int align, int count) {
+  lo = std::min((lo + align - 1) / align * align, hi);
+  const int step = std::max(align, (hi - lo) / std::max(1, count - 1) / align * align);
+  std::vector<int> widths;
+  for (int w = lo; w < hi; w += step) widths.push_back(w);
+  widths.push_back(hi);
+  return widths;
+}
+
 std::vector<uint32_t> packingOrder(const std::vector<glm::ivec2>& sizes) {
   std::vector<uint32_t> order(sizes.size());
   std::iota(order.begin(), order.end(), 0u);

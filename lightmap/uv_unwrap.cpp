@@ -1,5 +1,6 @@
 // uv_unwrap.cpp: lightmap UV generation: welding, chart growing by normal cone, planar
-// projection or LSCM per chart, minimum-area orientation and skyline packing.
+// projection or LSCM per chart, minimum-area orientation and packing by chart shape
+// (chart_packer.h).
 //
 // LSCM: B. Lévy, S. Petitjean, N. Ray, J. Maillot, "Least Squares Conformal Maps for
 // Automatic Texture Atlas Generation", SIGGRAPH 2002 (the complex per-triangle energy of
@@ -20,7 +21,8 @@
 #include <unordered_map>
 
 #include "lightmap/atlas.h"
-#include "lightmap/skyline_packer.h"
+#include "lightmap/chart_packer.h"
+#include "lightmap/sealed_surfaces.h"
 #include "src/parallel.h"
 
 namespace kiln {
@@ -34,6 +36,13 @@ double cross2(dvec2 a, dvec2 b) { return a.x * b.y - a.y * b.x; }
 
 // Largest ratio between a triangle's texel density and its chart's that LSCM may leave.
 constexpr double kMaxAreaDistortion = 2.0;
+// Largest ratio between a UV triangle's two singular values (1 = conformal) a chart may
+// have; LSCM over a whole chart stays near 1 (1.09 on a sphere), merges may not.
+constexpr double kMaxAnisotropy = 1.75;
+// A chart that fails (fold, overlap, distortion) is regrown with its cone angle times this:
+// gentler than halving, which cut curved meshes (a teapot) into several times the charts
+// they need.
+constexpr double kRegrowFactor = 0.7;
 
 // The object welded by position: what charts grow over.
 struct WeldedMesh {
@@ -43,10 +52,21 @@ struct WeldedMesh {
   std::vector<double> areas;                  // world area, per triangle
   std::vector<bool> degenerate;
   std::vector<std::array<int32_t, 3>> neighbours;  // across edge k = (v[k], v[k+1]); -1 none
+  // Edge k of triangle t is hard: the object's vertex normals differ across it (a crease the
+  // mesh shades as one). Charts do not grow over hard edges, so that bilinear lookups never
+  // mix the light of the two sides of a crease.
+  std::vector<std::array<bool, 3>> hard;
+  // Per triangle, 1 when no light reaches it (sealed_surfaces.h): such triangles and the
+  // others never share a chart.
+  std::vector<uint8_t> sealed;
 };
 
-WeldedMesh weld(const Object& object) {
+WeldedMesh weld(const Object& object, const std::vector<uint8_t>* sealed) {
   WeldedMesh m;
+  if (sealed && sealed->size() == object.triangles.size())
+    m.sealed = *sealed;
+  else
+    m.sealed.assign(object.triangles.size(), 0);
   // Exact position equality: glTF exporters duplicate vertices bit-for-bit at seams. The
   // comparison treats -0 and +0 as equal; positions were checked to be finite.
   std::map<std::array<float, 3>, uint32_t> ids;
@@ -70,6 +90,7 @@ WeldedMesh weld(const Object& object) {
   m.areas.assign(triangleCount, 0.0);
   m.degenerate.assign(triangleCount, false);
   m.neighbours.assign(triangleCount, {-1, -1, -1});
+  m.hard.assign(triangleCount, {false, false, false});
   for (size_t t = 0; t < triangleCount; ++t) {
     const uvec3 tri = object.triangles[t];
     m.tris[t] = {weldedOf[tri.x], weldedOf[tri.y], weldedOf[tri.z]};
@@ -121,6 +142,25 @@ WeldedMesh weld(const Object& object) {
       if (opposite && x.triangle != y.triangle) {
         m.neighbours[x.triangle][x.corner] = int32_t(y.triangle);
         m.neighbours[y.triangle][y.corner] = int32_t(x.triangle);
+        // Original vertices at the edge's two ends on each side: x's corner k meets y's
+        // corner k + 1 and the other way round.
+        if (object.normals.size() == object.positions.size()) {
+          const uvec3 tx = object.triangles[x.triangle], ty = object.triangles[y.triangle];
+          const uint32_t xa = tx[int(x.corner)], xb = tx[int((x.corner + 1) % 3)];
+          const uint32_t ya = ty[int((y.corner + 1) % 3)], yb = ty[int(y.corner)];
+          // A crease: the normals are split (1 degree: exporters write smooth normals
+          // bit-identical on both sides) and the faces meet at more than 20 degrees.
+          // Flat-shaded tessellations of smooth shapes split every normal, but their
+          // faces meet at small angles and their light is continuous enough for one chart.
+          constexpr float kSameNormal = 0.99985f;
+          const double kCreaseCos = 0.9397;  // cos 20 degrees
+          const bool hard =
+              (glm::dot(object.normals[xa], object.normals[ya]) < kSameNormal ||
+               glm::dot(object.normals[xb], object.normals[yb]) < kSameNormal) &&
+              glm::dot(m.normals[x.triangle], m.normals[y.triangle]) < kCreaseCos;
+          m.hard[x.triangle][x.corner] = hard;
+          m.hard[y.triangle][y.corner] = hard;
+        }
       }
     }
     i = j;
@@ -128,8 +168,40 @@ WeldedMesh weld(const Object& object) {
   return m;
 }
 
-// Grows charts over `subset` (ascending triangle indices): breadth-first from the lowest
-// unassigned triangle, taking edge neighbours whose normal is within the angle of the seed's.
+// Sealed regions (edge-connected sealed triangles) smaller than `minArea` are treated as
+// lit: shrinking them would save less than the charts they cut out of their neighbours cost.
+void unsealSmallRegions(WeldedMesh& m, double minArea) {
+  std::vector<uint8_t> seen(m.tris.size(), 0);
+  std::vector<uint32_t> region, stack;
+  for (uint32_t seed = 0; seed < m.tris.size(); ++seed) {
+    if (!m.sealed[seed] || seen[seed]) continue;
+    region.clear();
+    stack.assign(1, seed);
+    seen[seed] = 1;
+    double area = 0.0;
+    while (!stack.empty()) {
+      const uint32_t t = stack.back();
+      stack.pop_back();
+      region.push_back(t);
+      area += m.areas[t];
+      for (int32_t n : m.neighbours[t])
+        if (n >= 0 && m.sealed[n] && !seen[n]) {
+          seen[n] = 1;
+          stack.push_back(uint32_t(n));
+        }
+    }
+    if (area < minArea)
+      for (uint32_t t : region) m.sealed[t] = 0;
+  }
+}
+
+// Grows charts over `subset` (ascending triangle indices). Seeds are taken largest triangle
+// first (ties: lowest index), so that big flat regions start charts of their own; a chart
+// takes edge neighbours across soft edges, most aligned with the chart's area-weighted mean
+// normal first, while a neighbour's normal is within the angle of the current mean. Growing
+// by the mean (not the seed's normal) lets a chart cover up to twice the angle of curvature
+// symmetrically around its centre; the parameterization's distortion check (below) bounds
+// what that costs.
 std::vector<std::vector<uint32_t>> growCharts(const WeldedMesh& m,
                                               const std::vector<uint32_t>& subset,
                                               double angleDegrees) {
@@ -137,23 +209,45 @@ std::vector<std::vector<uint32_t>> growCharts(const WeldedMesh& m,
   // 0 = not in subset, 1 = free, 2 = taken.
   std::vector<uint8_t> state(m.tris.size(), 0);
   for (uint32_t t : subset) state[t] = 1;
+  std::vector<uint32_t> seeds = subset;
+  std::stable_sort(seeds.begin(), seeds.end(),
+                   [&](uint32_t a, uint32_t b) { return m.areas[a] > m.areas[b]; });
   std::vector<std::vector<uint32_t>> charts;
-  std::deque<uint32_t> queue;
-  for (uint32_t seed : subset) {
+  // (deviation from the mean normal when pushed, triangle): smallest first, ties by index.
+  using Candidate = std::pair<double, uint32_t>;
+  std::vector<Candidate> heap;
+  std::vector<uint32_t> stamp(m.tris.size(), 0);  // chart number + 1 that queued it
+  for (uint32_t seed : seeds) {
     if (state[seed] != 1) continue;
-    const dvec3 axis = m.normals[seed];
+    const uint32_t id = uint32_t(charts.size()) + 1;
+    dvec3 sum(0.0);
     std::vector<uint32_t> chart;
-    state[seed] = 2;
-    queue.push_back(seed);
-    while (!queue.empty()) {
-      const uint32_t t = queue.front();
-      queue.pop_front();
+    heap.clear();
+    heap.emplace_back(0.0, seed);
+    stamp[seed] = id;
+    while (!heap.empty()) {
+      std::pop_heap(heap.begin(), heap.end(), std::greater<>());
+      const uint32_t t = heap.back().second;
+      heap.pop_back();
+      if (state[t] != 1) continue;
+      const double len = glm::length(sum);
+      const dvec3 mean = len > 0.0 ? sum / len : m.normals[t];
+      if (glm::dot(m.normals[t], mean) < cosMax) {
+        stamp[t] = 0;  // may be reached again once the mean has moved
+        continue;
+      }
+      state[t] = 2;
       chart.push_back(t);
-      for (int32_t n : m.neighbours[t]) {
-        if (n < 0 || state[n] != 1) continue;
-        if (glm::dot(m.normals[n], axis) < cosMax) continue;
-        state[n] = 2;
-        queue.push_back(uint32_t(n));
+      sum += m.areas[t] * m.normals[t];
+      const dvec3 newMean = glm::normalize(sum);
+      for (int k = 0; k < 3; ++k) {
+        const int32_t n = m.neighbours[t][k];
+        if (n < 0 || state[n] != 1 || m.hard[t][k] || stamp[n] == id ||
+            m.sealed[n] != m.sealed[t])
+          continue;
+        stamp[n] = id;
+        heap.emplace_back(1.0 - glm::dot(m.normals[n], newMean), uint32_t(n));
+        std::push_heap(heap.begin(), heap.end(), std::greater<>());
       }
     }
     std::sort(chart.begin(), chart.end());
@@ -219,9 +313,70 @@ std::array<dvec2, 3> localTriangle(const WeldedMesh& m, uint32_t t) {
 // LSCM (Lévy et al. 2002). For triangle T with local coordinates z_j = x_j + i y_j, the
 // conformal energy is |sum_j W_j U_j|^2 / d_T with W_1 = z_3 - z_2, W_2 = z_1 - z_3,
 // W_3 = z_2 - z_1, U_j = u_j + i v_j and d_T = twice the area; the identity map has zero
-// energy, so the solution keeps the surface's orientation. Two vertices far apart along the
-// chart's longest bounding-box axis are pinned at their 3D distance. Returns false when the
-// system cannot be solved or the map folds (a UV triangle with non-positive area).
+// energy, so the solution keeps the surface's orientation. The energy sums over `triangles`
+// (a subset of the chart's); the vertices with pinned[i] set keep c.uv[i], the others are
+// solved for. Returns false when the system cannot be solved or a UV triangle of `triangles`
+// has non-positive area (a fold).
+bool solveLscm(const WeldedMesh& m, const std::vector<uint32_t>& triangles,
+               const std::vector<bool>& pinned, Chart& c) {
+  const size_t n = c.vertices.size();
+  // Unknowns: (u, v) of every vertex that is not pinned.
+  std::vector<int32_t> unknown(n, -1);
+  int32_t freeCount = 0;
+  for (uint32_t i = 0; i < n; ++i)
+    if (!pinned[i]) unknown[i] = freeCount++;
+
+  if (freeCount > 0) {
+    const size_t rows = 2 * triangles.size();
+    std::vector<Eigen::Triplet<double>> entries;
+    entries.reserve(rows * 6);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(rows));
+    for (size_t k = 0; k < triangles.size(); ++k) {
+      const uint32_t t = triangles[k];
+      const std::array<dvec2, 3> z = localTriangle(m, t);
+      const double s = 1.0 / std::sqrt(2.0 * m.areas[t]);
+      const dvec2 w[3] = {z[2] - z[1], z[0] - z[2], z[1] - z[0]};
+      const int re = int(2 * k), im = int(2 * k + 1);
+      for (int j = 0; j < 3; ++j) {
+        const double a = s * w[j].x, b = s * w[j].y;
+        const uint32_t v = c.local(m.tris[t][j]);
+        // (a + ib)(u + iv) = (a u - b v) + i (b u + a v)
+        if (unknown[v] >= 0) {
+          const int col = 2 * unknown[v];
+          entries.emplace_back(re, col, a);
+          entries.emplace_back(re, col + 1, -b);
+          entries.emplace_back(im, col, b);
+          entries.emplace_back(im, col + 1, a);
+        } else {
+          const dvec2 p = c.uv[v];
+          rhs[re] -= a * p.x - b * p.y;
+          rhs[im] -= b * p.x + a * p.y;
+        }
+      }
+    }
+    Eigen::SparseMatrix<double> a(Eigen::Index(rows), 2 * freeCount);
+    a.setFromTriplets(entries.begin(), entries.end());
+    const Eigen::SparseMatrix<double> normal = a.transpose() * a;
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(normal);
+    if (solver.info() != Eigen::Success) return false;
+    const Eigen::VectorXd x = solver.solve(a.transpose() * rhs);
+    if (solver.info() != Eigen::Success) return false;
+    for (uint32_t i = 0; i < n; ++i) {
+      if (unknown[i] < 0) continue;
+      c.uv[i] = dvec2(x[2 * unknown[i]], x[2 * unknown[i] + 1]);
+      if (!std::isfinite(c.uv[i].x) || !std::isfinite(c.uv[i].y)) return false;
+    }
+  }
+  for (uint32_t t : triangles) {
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    if (!(cross2(u1 - u0, u2 - u0) > 0.0)) return false;
+  }
+  return true;
+}
+
+// LSCM of a whole chart: two vertices far apart along the chart's longest bounding-box axis
+// are pinned at their 3D distance.
 bool lscmChart(const WeldedMesh& m, Chart& c) {
   const size_t n = c.vertices.size();
   if (n < 3) return false;
@@ -239,66 +394,11 @@ bool lscmChart(const WeldedMesh& m, Chart& c) {
     if (x > m.positions[c.vertices[pinB]][axis]) pinB = i;
   }
   if (pinA == pinB) return false;
-  const dvec2 pinUv[2] = {
-      dvec2(0.0),
-      dvec2(glm::length(m.positions[c.vertices[pinB]] - m.positions[c.vertices[pinA]]), 0.0)};
-
-  // Unknowns: (u, v) of every vertex but the pins.
-  std::vector<int32_t> unknown(n, -1);
-  int32_t freeCount = 0;
-  for (uint32_t i = 0; i < n; ++i)
-    if (i != pinA && i != pinB) unknown[i] = freeCount++;
-
-  const size_t rows = 2 * c.triangles.size();
-  std::vector<Eigen::Triplet<double>> entries;
-  entries.reserve(rows * 6);
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(rows));
-  for (size_t k = 0; k < c.triangles.size(); ++k) {
-    const uint32_t t = c.triangles[k];
-    const std::array<dvec2, 3> z = localTriangle(m, t);
-    const double s = 1.0 / std::sqrt(2.0 * m.areas[t]);
-    const dvec2 w[3] = {z[2] - z[1], z[0] - z[2], z[1] - z[0]};
-    const int re = int(2 * k), im = int(2 * k + 1);
-    for (int j = 0; j < 3; ++j) {
-      const double a = s * w[j].x, b = s * w[j].y;
-      const uint32_t v = c.local(m.tris[t][j]);
-      // (a + ib)(u + iv) = (a u - b v) + i (b u + a v)
-      if (unknown[v] >= 0) {
-        const int col = 2 * unknown[v];
-        entries.emplace_back(re, col, a);
-        entries.emplace_back(re, col + 1, -b);
-        entries.emplace_back(im, col, b);
-        entries.emplace_back(im, col + 1, a);
-      } else {
-        const dvec2 p = pinUv[v == pinA ? 0 : 1];
-        rhs[re] -= a * p.x - b * p.y;
-        rhs[im] -= b * p.x + a * p.y;
-      }
-    }
-  }
-  Eigen::SparseMatrix<double> a(Eigen::Index(rows), 2 * freeCount);
-  a.setFromTriplets(entries.begin(), entries.end());
-  const Eigen::SparseMatrix<double> normal = a.transpose() * a;
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(normal);
-  if (solver.info() != Eigen::Success) return false;
-  const Eigen::VectorXd x = solver.solve(a.transpose() * rhs);
-  if (solver.info() != Eigen::Success) return false;
-
-  for (uint32_t i = 0; i < n; ++i) {
-    if (i == pinA)
-      c.uv[i] = pinUv[0];
-    else if (i == pinB)
-      c.uv[i] = pinUv[1];
-    else
-      c.uv[i] = dvec2(x[2 * unknown[i]], x[2 * unknown[i] + 1]);
-    if (!std::isfinite(c.uv[i].x) || !std::isfinite(c.uv[i].y)) return false;
-  }
-  for (uint32_t t : c.triangles) {
-    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
-                u2 = c.uv[c.local(m.tris[t][2])];
-    if (!(cross2(u1 - u0, u2 - u0) > 0.0)) return false;
-  }
-  return true;
+  std::vector<bool> pinned(n, false);
+  pinned[pinA] = pinned[pinB] = true;
+  c.uv[pinA] = dvec2(0.0);
+  c.uv[pinB] = dvec2(glm::length(m.positions[c.vertices[pinB]] - m.positions[c.vertices[pinA]]), 0.0);
+  return solveLscm(m, c.triangles, pinned, c);
 }
 
 // Whether two UV triangles' interiors overlap, by the separating axis theorem: in 2D, two
@@ -324,8 +424,10 @@ bool trianglesOverlap(const std::array<dvec2, 3>& a, const std::array<dvec2, 3>&
 }
 
 // Whether any two triangles of the chart overlap in UV (LSCM is only locally injective: a
-// chart's boundary can still run over itself). Sweep over x-sorted bounding boxes.
-bool chartOverlaps(const WeldedMesh& m, const Chart& c) {
+// chart's boundary can still run over itself). Sweep over x-sorted bounding boxes. With
+// `fresh` (per entry of c.triangles), pairs of two triangles that are not fresh are skipped
+// (they were checked before).
+bool chartOverlaps(const WeldedMesh& m, const Chart& c, const std::vector<bool>* fresh = nullptr) {
   const size_t n = c.triangles.size();
   std::vector<std::array<dvec2, 3>> uv(n);
   std::vector<dvec2> lo(n), hi(n);
@@ -345,6 +447,7 @@ bool chartOverlaps(const WeldedMesh& m, const Chart& c) {
   for (size_t i = 0; i < n; ++i)
     for (size_t j = i + 1; j < n && lo[order[j]].x < hi[order[i]].x - eps; ++j) {
       const uint32_t a = order[i], b = order[j];
+      if (fresh && !(*fresh)[a] && !(*fresh)[b]) continue;
       if (lo[b].y >= hi[a].y - eps || lo[a].y >= hi[b].y - eps) continue;
       if (trianglesOverlap(uv[a], uv[b], eps)) return true;
     }
@@ -358,8 +461,42 @@ double coneCos(const WeldedMesh& m, const Chart& c, dvec3 mean) {
   return minCos;
 }
 
-// Planar projection when the chart is flat, LSCM otherwise. False when the map folds or
-// overlaps itself.
+// Whether the chart's texel density varies by at most kMaxAreaDistortion between triangles
+// and its mean (LSCM is conformal but not area-preserving: measured at most 1.13 on
+// 45-degree cones, 1.56 on 60-degree ones) and no triangle is stretched more than
+// kMaxAnisotropy in one direction than in the other.
+bool distortionWithinBound(const WeldedMesh& m, const Chart& c) {
+  double uvSum = 0.0, worldSum = 0.0;
+  std::vector<double> uvArea(c.triangles.size());
+  for (size_t i = 0; i < c.triangles.size(); ++i) {
+    const uint32_t t = c.triangles[i];
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    uvArea[i] = 0.5 * cross2(u1 - u0, u2 - u0);
+    uvSum += uvArea[i];
+    worldSum += m.areas[t];
+  }
+  for (size_t i = 0; i < c.triangles.size(); ++i) {
+    const double ratio = (uvArea[i] / m.areas[c.triangles[i]]) * (worldSum / uvSum);
+    if (!(ratio <= kMaxAreaDistortion && ratio >= 1.0 / kMaxAreaDistortion)) return false;
+    // Anisotropy s1 / s2 of the map's Jacobian (a merge solved onto a fixed map is less
+    // conformal than LSCM over the whole chart).
+    const uint32_t t = c.triangles[i];
+    const std::array<dvec2, 3> z = localTriangle(m, t);
+    const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
+                u2 = c.uv[c.local(m.tris[t][2])];
+    const glm::dmat2 j = glm::dmat2(u1 - u0, u2 - u0) * glm::inverse(glm::dmat2(z[1] - z[0], z[2] - z[0]));
+    const double e = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
+    const double det = std::abs(glm::determinant(j));
+    const double root = std::sqrt(std::max(0.0, e * e - 4.0 * det * det));
+    // s1^2 = (e + root) / 2, s2^2 = (e - root) / 2: s1 / s2 <= a  <=>  (e + root) <= a^2 (e - root)
+    if (!(e + root <= kMaxAnisotropy * kMaxAnisotropy * (e - root))) return false;
+  }
+  return true;
+}
+
+// Planar projection when the chart is flat, LSCM otherwise. False when the map folds,
+// overlaps itself or exceeds the distortion bound.
 bool parameterizeChart(const WeldedMesh& m, const UnwrapSettings& settings, Chart& c) {
   const double planarCos = std::cos(double(settings.planarAngleDegrees) * double(kPi) / 180.0);
   const dvec3 n = meanNormal(m, c);
@@ -368,57 +505,113 @@ bool parameterizeChart(const WeldedMesh& m, const UnwrapSettings& settings, Char
     c.planar = true;
   } else {
     c.planar = false;
-    if (!lscmChart(m, c)) return false;
-    // LSCM is conformal but not area-preserving: reject charts whose texel density would vary
-    // by more than 2x (measured on 45-degree cones: at most 1.13), so they get split.
-    double uvSum = 0.0, worldSum = 0.0;
-    std::vector<double> uvArea(c.triangles.size());
-    for (size_t i = 0; i < c.triangles.size(); ++i) {
-      const uint32_t t = c.triangles[i];
-      const dvec2 u0 = c.uv[c.local(m.tris[t][0])], u1 = c.uv[c.local(m.tris[t][1])],
-                  u2 = c.uv[c.local(m.tris[t][2])];
-      uvArea[i] = 0.5 * cross2(u1 - u0, u2 - u0);
-      uvSum += uvArea[i];
-      worldSum += m.areas[t];
-    }
-    for (size_t i = 0; i < c.triangles.size(); ++i) {
-      const double ratio = (uvArea[i] / m.areas[c.triangles[i]]) * (worldSum / uvSum);
-      if (!(ratio <= kMaxAreaDistortion && ratio >= 1.0 / kMaxAreaDistortion)) return false;
-    }
+    if (!lscmChart(m, c) || !distortionWithinBound(m, c)) return false;
   }
   return !chartOverlaps(m, c);
 }
 
-// Parameterizes `subset` and appends the resulting charts: one per grown chart when it works,
-// several when LSCM folds and the region is regrown with half the cone angle.
+// The union of two edge-adjacent charts, parameterized by keeping `base`'s UVs and solving
+// LSCM for `added`'s other vertices, with the shared vertices pinned where `base` has them.
+// Much cheaper than solving the union again (a merge costs the added chart's size, not the
+// union's), and `base`'s map, already checked, does not move. nullopt when the union folds,
+// overlaps or exceeds the distortion bound.
+std::optional<Chart> extendChart(const WeldedMesh& m, const UnwrapSettings& settings,
+                                 const Chart& base, const Chart& added) {
+  std::vector<uint32_t> tris = base.triangles;
+  tris.insert(tris.end(), added.triangles.begin(), added.triangles.end());
+  std::sort(tris.begin(), tris.end());
+  Chart u = makeChart(m, std::move(tris));
+  if (base.planar && added.planar) {
+    // Two flat charts: planar again when coplanar (a quad split at a crease it no longer has).
+    Chart flat = u;
+    const double planarCos =
+        std::cos(double(settings.planarAngleDegrees) * double(kPi) / 180.0);
+    const dvec3 n = meanNormal(m, flat);
+    if (coneCos(m, flat, n) >= planarCos) {
+      projectChart(m, n, flat);
+      flat.planar = true;
+      if (!chartOverlaps(m, flat)) return flat;
+      return std::nullopt;
+    }
+  }
+  std::vector<bool> pinned(u.vertices.size(), false);
+  for (size_t i = 0; i < base.vertices.size(); ++i) {
+    const uint32_t local = u.local(base.vertices[i]);
+    pinned[local] = true;
+    u.uv[local] = base.uv[i];
+  }
+  if (!solveLscm(m, added.triangles, pinned, u)) return std::nullopt;
+  u.planar = false;
+  if (!distortionWithinBound(m, u)) return std::nullopt;
+  std::vector<bool> fresh(u.triangles.size(), false);
+  for (size_t i = 0; i < u.triangles.size(); ++i)
+    fresh[i] = !std::binary_search(base.triangles.begin(), base.triangles.end(), u.triangles[i]);
+  if (chartOverlaps(m, u, &fresh)) return std::nullopt;
+  return u;
+}
+
+// Splits a chart's triangles in two halves at the median of their centroids along the
+// longest axis of the centroids' bounding box (ties by triangle index).
+std::array<std::vector<uint32_t>, 2> bisect(const WeldedMesh& m, std::vector<uint32_t> tris) {
+  std::vector<dvec3> centroid(tris.size());
+  dvec3 lo(1e300), hi(-1e300);
+  for (size_t i = 0; i < tris.size(); ++i) {
+    const auto& v = m.tris[tris[i]];
+    centroid[i] = (m.positions[v[0]] + m.positions[v[1]] + m.positions[v[2]]) / 3.0;
+    lo = glm::min(lo, centroid[i]);
+    hi = glm::max(hi, centroid[i]);
+  }
+  const dvec3 e = hi - lo;
+  const int axis = e.x >= e.y && e.x >= e.z ? 0 : e.y >= e.z ? 1 : 2;
+  std::vector<uint32_t> order(tris.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+    return centroid[a][axis] != centroid[b][axis] ? centroid[a][axis] < centroid[b][axis]
+                                                  : tris[a] < tris[b];
+  });
+  std::array<std::vector<uint32_t>, 2> halves;
+  for (size_t i = 0; i < order.size(); ++i)
+    halves[i < order.size() / 2 ? 0 : 1].push_back(tris[order[i]]);
+  for (auto& h : halves) std::sort(h.begin(), h.end());
+  return halves;
+}
+
+// Parameterizes `subset` and appends the resulting charts: one per grown chart when it works.
+// A chart that fails is regrown with a smaller cone angle when it is curved (LSCM folded it,
+// overlapped it or distorted it beyond the bound); a flat one (coplanar overlapping layers,
+// which no angle separates) or one still failing at 2 degrees is cut in two halves that are
+// regrown on their own, so that only the overlapping spots end up in small charts.
 void buildCharts(const WeldedMesh& m, const std::vector<uint32_t>& subset, double angle,
                  const UnwrapSettings& settings, std::vector<Chart>& out) {
   for (std::vector<uint32_t>& group : growCharts(m, subset, angle)) {
     Chart c = makeChart(m, std::move(group));
     if (parameterizeChart(m, settings, c)) {
       out.push_back(std::move(c));
-    } else if (angle / 2.0 >= 2.0) {
-      buildCharts(m, c.triangles, angle / 2.0, settings, out);
+    } else if (!c.planar && angle * kRegrowFactor >= 2.0) {
+      buildCharts(m, c.triangles, angle * kRegrowFactor, settings, out);
     } else {
-      // Still overlapping with normals within 2 degrees (coplanar overlapping geometry):
-      // one chart per triangle, each projected onto its own plane, cannot overlap.
-      for (uint32_t t : c.triangles) {
-        Chart single = makeChart(m, {t});
-        projectChart(m, m.normals[t], single);
-        single.planar = true;
-        out.push_back(std::move(single));
-      }
+      // A single triangle always parameterizes (projected onto its own plane), so halves of
+      // two or more triangles end the recursion.
+      for (const std::vector<uint32_t>& half : bisect(m, c.triangles))
+        buildCharts(m, half, angle, settings, out);
     }
   }
 }
 
-// Greedy growth from the lowest free triangle leaves short charts along the borders of long
-// ones (a 24-sided cylinder gets 6 charts where 4 would do). Merge each chart, smallest world
-// area first, into the neighbour it shares the most edges with, when every normal of the
-// union stays within the cone angle of the union's mean normal and the union parameterizes
-// without a fold. A few passes; deterministic (ties by chart index).
+// Growth leaves short charts along the borders of long ones (a 24-sided cylinder gets more
+// charts than its arc needs) and small pieces between creases (bevels, thin strips), each of
+// which costs a gutter on every side. Merge each chart, smallest world area first, into the
+// neighbour it shares the most edges with, when the union parameterizes within the distortion
+// bound without a fold or an overlap, and either
+//   - the chart is small (under settings.smallChartTexels texels at the expected density):
+//     any neighbour, across creases too (a crease inside a few texels does not show), or
+//   - every normal of the union is strictly within the cone angle of the union's mean normal
+//     and the two share a soft edge (creases stay seams).
+// A few passes; deterministic (ties by chart index).
 void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vector<Chart>& charts) {
   const double cosMax = std::cos(double(settings.maxChartAngleDegrees) * double(kPi) / 180.0);
+  const double texelArea = 1.0 / (double(settings.texelsPerUnit) * settings.texelsPerUnit);
+  const double smallArea = double(settings.smallChartTexels) * texelArea;
   std::vector<int32_t> chartOf(m.tris.size(), -1);
   std::vector<double> area(charts.size(), 0.0);
   for (uint32_t i = 0; i < charts.size(); ++i)
@@ -437,25 +630,35 @@ void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vecto
     bool mergedAny = false;
     for (uint32_t c : order) {
       if (!alive[c]) continue;
-      std::map<uint32_t, int> shared;
+      const bool small = area[c] < smallArea;
+      std::map<uint32_t, int> shared;  // neighbour chart -> shared edges (soft ones unless small)
       for (uint32_t t : charts[c].triangles)
-        for (int32_t nb : m.neighbours[t])
-          if (nb >= 0 && chartOf[nb] >= 0 && chartOf[nb] != int32_t(c))
+        for (int k = 0; k < 3; ++k) {
+          const int32_t nb = m.neighbours[t][k];
+          if (nb >= 0 && chartOf[nb] >= 0 && chartOf[nb] != int32_t(c) && (small || !m.hard[t][k]))
             ++shared[uint32_t(chartOf[nb])];
+        }
       std::vector<std::pair<int, uint32_t>> candidates;  // (-shared edges, chart)
-      for (auto [chart, count] : shared) candidates.emplace_back(-count, chart);
+      for (auto [chart, count] : shared)
+        if (m.sealed[charts[chart].triangles.front()] == m.sealed[charts[c].triangles.front()])
+          candidates.emplace_back(-count, chart);
       std::sort(candidates.begin(), candidates.end());
       for (auto [negCount, other] : candidates) {
-        std::vector<uint32_t> tris = charts[other].triangles;
-        tris.insert(tris.end(), charts[c].triangles.begin(), charts[c].triangles.end());
-        std::sort(tris.begin(), tris.end());
-        Chart merged = makeChart(m, std::move(tris));
-        // Strictly inside the cone: two equal perpendicular faces (a box's) are exactly 45
-        // degrees from their mean normal and must stay apart.
-        if (coneCos(m, merged, meanNormal(m, merged)) < cosMax + 1e-6) continue;
-        if (!parameterizeChart(m, settings, merged)) continue;
+        if (!small) {
+          // Strictly inside the cone: two equal perpendicular faces (a box's) are exactly 45
+          // degrees from their mean normal and must stay apart.
+          std::vector<uint32_t> tris = charts[other].triangles;
+          tris.insert(tris.end(), charts[c].triangles.begin(), charts[c].triangles.end());
+          const Chart both = makeChart(m, std::move(tris));
+          if (coneCos(m, both, meanNormal(m, both)) < cosMax + 1e-6) continue;
+        }
+        // The larger chart keeps its map; the smaller one is solved onto it.
+        const bool keepOther = area[other] >= area[c];
+        std::optional<Chart> merged = keepOther ? extendChart(m, settings, charts[other], charts[c])
+                                                : extendChart(m, settings, charts[c], charts[other]);
+        if (!merged) continue;
         for (uint32_t t : charts[c].triangles) chartOf[t] = int32_t(other);
-        charts[other] = std::move(merged);
+        charts[other] = std::move(*merged);
         area[other] += area[c];
         alive[c] = false;
         charts[c] = Chart();
@@ -470,6 +673,10 @@ void mergeCharts(const WeldedMesh& m, const UnwrapSettings& settings, std::vecto
     if (alive[i]) kept.push_back(std::move(charts[i]));
   charts = std::move(kept);
 }
+
+// A point of a chart with extent e turned by 90 degrees counter-clockwise, (x, y) ->
+// (e.y - y, x): the turned chart's extent is (e.y, e.x).
+dvec2 quarterTurn(dvec2 p, dvec2 e) { return dvec2(e.y - p.y, p.x); }
 
 // Andrew's monotone chain convex hull, counter-clockwise, without collinear points.
 std::vector<dvec2> convexHull(std::vector<dvec2> p) {
@@ -544,14 +751,10 @@ dvec2 normalizeChart(const WeldedMesh& m, Chart& c) {
   return hi - lo;
 }
 
-int texelsUp(double x) {
-  // Round up to whole texels, tolerating float noise on exact multiples.
-  return std::max(1, int(std::ceil(x - 1e-6)));
-}
-
 }  // namespace
 
-Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings) {
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings,
+                                         const std::vector<uint8_t>* sealed) {
   const std::string who = "object '" + object.name + "'";
   if (!(settings.texelsPerUnit > 0.0f) || !std::isfinite(settings.texelsPerUnit))
     return Error{who + ": unwrap texelsPerUnit must be > 0 (got " +
@@ -568,7 +771,15 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
       return Error{who + ": triangles[" + std::to_string(t) + "] has a vertex index out of range"};
   }
 
-  const WeldedMesh m = weld(object);
+  if (!(settings.sealedTexels > 0.0f) || !std::isfinite(settings.sealedTexels))
+    return Error{who + ": unwrap sealedTexels must be > 0"};
+  if (sealed && sealed->size() != object.triangles.size())
+    return Error{who + ": sealed flags for " + std::to_string(sealed->size()) +
+                 " triangles, the object has " + std::to_string(object.triangles.size())};
+
+  WeldedMesh m = weld(object, settings.shrinkSealed ? sealed : nullptr);
+  unsealSmallRegions(m, double(settings.smallChartTexels) /
+                            (double(settings.texelsPerUnit) * settings.texelsPerUnit));
   std::vector<uint32_t> good, degenerate;
   for (uint32_t t = 0; t < m.tris.size(); ++t) (m.degenerate[t] ? degenerate : good).push_back(t);
 
@@ -576,43 +787,55 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   buildCharts(m, good, settings.maxChartAngleDegrees, settings, charts);
   mergeCharts(m, settings, charts);
 
-  // Charts in texels at the expected density, packed with the gutter between them.
+  // Charts in texels at the expected density, packed by their shape (chart_packer.h) with
+  // the gutter between their covered texels.
   const double d = settings.texelsPerUnit;
-  const int gutter = settings.gutterTexels;
+  std::vector<ChartFootprint> footprints(charts.size()), quarters(charts.size());
   std::vector<dvec2> extents(charts.size());
-  std::vector<glm::ivec2> items(charts.size());
-  double itemArea = 0.0;
-  int minSide = 1;
+  std::vector<bool> shrunk(charts.size(), false);
   for (size_t i = 0; i < charts.size(); ++i) {
-    extents[i] = normalizeChart(m, charts[i]);
-    items[i] = glm::ivec2(texelsUp(extents[i].x * d) + gutter, texelsUp(extents[i].y * d) + gutter);
-    itemArea += double(items[i].x) * items[i].y;
-    minSide = std::max({minSide, items[i].x, items[i].y});
-  }
-  const std::vector<uint32_t> order = packingOrder(items);
-  std::vector<glm::ivec2> placed(charts.size());
-  int side = std::max(minSide, int(std::ceil(std::sqrt(itemArea))));
-  for (;;) {
-    SkylinePacker packer(side, side);
-    bool fits = true;
-    for (uint32_t i : order) {
-      const auto at = packer.insert(items[i].x, items[i].y);
-      if (!at) {
-        fits = false;
-        break;
-      }
-      placed[i] = *at;
+    dvec2 extent = normalizeChart(m, charts[i]);
+    // Sealed: at most sealedTexels across (the same scale on both axes: no flip, no fold).
+    const double across = std::max(extent.x, extent.y) * d;
+    if (m.sealed[charts[i].triangles.front()] && across > settings.sealedTexels) {
+      const double scale = settings.sealedTexels / across;
+      for (dvec2& uv : charts[i].uv) uv *= scale;
+      extent *= scale;
+      shrunk[i] = true;
     }
-    if (fits) break;
-    side += std::max(1, side / 16);
+    extents[i] = extent;
+    std::vector<std::array<dvec2, 3>> tris;
+    tris.reserve(charts[i].triangles.size());
+    for (uint32_t t : charts[i].triangles) {
+      const Chart& c = charts[i];
+      tris.push_back({c.uv[c.local(m.tris[t][0])] * d, c.uv[c.local(m.tris[t][1])] * d,
+                      c.uv[c.local(m.tris[t][2])] * d});
+    }
+    footprints[i] = chartFootprint(tris, extent * d);
+    for (auto& tri : tris)
+      for (dvec2& p : tri) p = quarterTurn(p, extent * d);
+    quarters[i] = chartFootprint(tris, dvec2(extent.y, extent.x) * d);
   }
+  const ChartPacking packed = packCharts(footprints, quarters, settings.gutterTexels);
+  // A chart's texel position: its corner plus its own texel coordinates, turned by 90
+  // and/or 180 degrees as the packer chose (rotations: the orientation is kept).
+  auto texelPosition = [&](uint32_t chart, dvec2 uvWorld) {
+    dvec2 p = uvWorld * d;
+    if (packed.quarter[chart]) p = quarterTurn(p, extents[chart] * d);
+    const ChartFootprint& f = packed.quarter[chart] ? quarters[chart] : footprints[chart];
+    p += f.offset;  // footprint coordinates (chart_packer.h)
+    return dvec2(packed.corners[chart]) +
+           (packed.turned[chart] ? dvec2(f.columns, f.rows) - p : p);
+  };
 
-  // Texel positions, then one uniform scale into [0, 1]^2 (the longer extent becomes 1).
+  // Texel positions (all > 0: charts sit inside their footprints), then one uniform scale
+  // into [0, 1]^2 (the longer extent becomes 1).
   double extent = 0.0;
-  for (size_t i = 0; i < charts.size(); ++i) {
-    extent = std::max(extent, placed[i].x + extents[i].x * d);
-    extent = std::max(extent, placed[i].y + extents[i].y * d);
-  }
+  for (uint32_t i = 0; i < charts.size(); ++i)
+    for (const dvec2& uv : charts[i].uv) {
+      const dvec2 p = texelPosition(i, uv);
+      extent = std::max({extent, p.x, p.y});
+    }
   if (!(extent > 0.0)) extent = 1.0;
   const double uvPerTexel = 1.0 / extent;
 
@@ -638,7 +861,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
         dvec2 uv(0.0);  // degenerate triangles collapse to the origin: no area, no texels
         if (chart < charts.size()) {
           const Chart& c = charts[chart];
-          uv = (dvec2(placed[chart]) + c.uv[c.local(m.tris[t][k])] * d) * uvPerTexel;
+          uv = texelPosition(chart, c.uv[c.local(m.tris[t][k])]) * uvPerTexel;
         }
         r.uv1.push_back(vec2(uv));
       }
@@ -651,6 +874,11 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   s.chartCount = int(charts.size());
   s.degenerateTriangles = int(degenerate.size());
   for (const Chart& c : charts) s.planarCharts += c.planar ? 1 : 0;
+  for (size_t i = 0; i < charts.size(); ++i)
+    if (shrunk[i]) {
+      ++s.sealedCharts;
+      s.sealedTriangles += int(charts[i].triangles.size());
+    }
   double sumArea = 0.0, sumStretch = 0.0, uvAreaSum = 0.0;
   dvec2 uvMax(0.0);
   for (const vec2& uv : r.uv1) uvMax = glm::max(uvMax, dvec2(uv));
@@ -665,6 +893,7 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
       ++s.flippedTriangles;
       continue;
     }
+    if (shrunk[r.triangleChart[t]]) continue;  // distortion is measured on full-size charts
     // Jacobian J = [u1-u0 u2-u0] [z1-z0 z2-z0]^-1 of the map from the surface to UV.
     const glm::dmat2 q(z[1] - z[0], z[2] - z[0]);
     const glm::dmat2 u(u1 - u0, u2 - u0);
@@ -714,7 +943,8 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   std::vector<std::optional<UnwrapResult>> unwraps(n);
   std::vector<std::string> errors(n);
   auto needs = [&](const Object& o) {
-    return isLightmapped(o) && o.uv1.size() != o.positions.size();
+    return isLightmapped(o) && o.uv1.size() != o.positions.size() &&
+           !tooSmallForLightmap(o, resolution, settings.minObjectTexels);
   };
   // Progress in triangles: objects differ wildly in size, and time grows with triangles.
   size_t triangles = 0;
@@ -722,6 +952,20 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
     if (needs(o)) triangles += o.triangles.size();
   Progress progress("UV generation", triangles, "triangles",
                     settings.showProgress && triangles > 0);
+  // Sealed triangles, from rays over the static objects (what the bake's tracer holds). A
+  // scene without any light (no lights, a black sky, nothing emissive: an AO-only bake, a
+  // test scene) has no sealed surfaces to tell apart: everything would be.
+  bool anyLight = !scene.lights.empty() || !scene.sky.isBlack();
+  for (const Material& material : scene.materials) anyLight |= material.isEmissive();
+  std::vector<std::vector<uint8_t>> sealed;
+  if (settings.shrinkSealed && anyLight && triangles > 0) {
+    auto tracer = Tracer::create(scene, TracerGeometry::BakedGI);
+    if (!tracer) return Error{"sealed surfaces: " + tracer.error()};
+    SealedSettings ss;
+    ss.parallel.cancel = settings.cancel;
+    sealed = findSealedTriangles(scene, **tracer, ss);
+    if (settings.cancel && settings.cancel->load()) return Error{"cancelled"};
+  }
   ParallelOptions options;
   options.grain = 1;  // objects differ wildly in size
   options.cancel = settings.cancel;
@@ -734,7 +978,8 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
           if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) return;
           UnwrapSettings s = settings;
           s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
-          Result<UnwrapResult> r = generateLightmapUvs(o, s);
+          Result<UnwrapResult> r = generateLightmapUvs(
+              o, s, i < sealed.size() && !sealed[i].empty() ? &sealed[i] : nullptr);
           if (r.ok())
             unwraps[i] = std::move(*r);
           else

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "kiln/result.h"
+#include "lightmap/atlas.h"
 #include "src/scene.h"
 
 namespace kiln {
@@ -29,17 +30,35 @@ struct UnwrapSettings {
   // Empty texels between charts, so that bilinear filtering and dilation of one chart never
   // reach another.
   int gutterTexels = 2;
-  // A chart takes a triangle when its normal is within this angle of the chart's seed
-  // normal; small charts are then merged into neighbours while every normal of the union
-  // stays within this angle of the union's mean normal. 45 degrees: a box's faces (90
-  // degrees apart) always get charts of their own, and a 90-degree cone keeps LSCM's area
-  // distortion low (measured: max 1.13 on spheres, 18 charts for a UV sphere) while a
-  // cylinder needs 4 to 5 charts. Charts that LSCM maps with a fold or an overlap are regrown
+  // A chart grows over soft edges (not over creases, where the mesh's vertex normals are
+  // split) while every new triangle's normal is within this angle of the chart's current
+  // area-weighted mean normal; charts are then merged into neighbours while every normal of
+  // the union stays strictly within this angle of the union's mean normal. 60 degrees: a
+  // chart spans up to about 120 degrees of arc (a cylinder unrolls in 3 charts, a sphere in
+  // about 10) while LSCM's area distortion stays within kMaxAreaDistortion; a box's faces
+  // (90 degrees apart, exactly 45 from their mean) are creases and stay apart anyway.
+  // Charts that LSCM maps with a fold, an overlap or too much area distortion are regrown
   // with half the angle (down to 2 degrees, then one chart per triangle).
-  float maxChartAngleDegrees = 45.0f;
+  float maxChartAngleDegrees = 60.0f;
+  // Charts smaller than this many texels (at texelsPerUnit) are merged into a neighbour even
+  // across a crease or beyond the cone, when the union still parameterizes without a fold,
+  // an overlap or too much distortion: every chart costs a gutter on each side, which on a
+  // chart of a few texels is most of its space.
+  float smallChartTexels = 100.0f;
   // Charts whose normals all lie within this angle of their mean normal are projected onto
   // the plane instead of solved with LSCM (stretch <= 1 / cos(angle) - 1 = 1.5e-4).
   float planarAngleDegrees = 1.0f;
+  // Charts whose triangles no light reaches (sealed_surfaces.h: a box's face resting on the
+  // floor, the backs of a closed shell) are shrunk to at most sealedTexels texels across:
+  // their lightmap is black or meaningless, and full resolution would spend atlas space on
+  // it. generateLightmapUvs takes the sealed triangles from its caller;
+  // generateMissingLightmapUvs finds them with rays when this is true. 0 < sealedTexels.
+  bool shrinkSealed = true;
+  float sealedTexels = 1.0f;
+  // generateMissingLightmapUvs only: objects too small for a useful lightmap
+  // (atlas.h tooSmallForLightmap with this threshold; keep it equal to the atlas's
+  // minObjectTexels) are lit by probes and get no UVs.
+  float minObjectTexels = kMinObjectTexels;
   // generateMissingLightmapUvs only: a progress line on stderr ("UV generation", in
   // triangles), and a flag polled between objects that stops it with an Error "cancelled".
   bool showProgress = false;
@@ -52,6 +71,8 @@ struct UnwrapStats {
   int planarCharts = 0;         // of which projected rather than solved with LSCM
   int degenerateTriangles = 0;  // zero-area triangles, mapped to a point of UV space
   int flippedTriangles = 0;     // UV triangles with non-positive signed area (should be 0)
+  int sealedCharts = 0;         // charts shrunk because no light reaches them
+  int sealedTriangles = 0;      // triangles in them
   // Area-weighted L2 stretch (Sander et al. 2001) of the map surface -> UV in world units:
   // sqrt(sum A (s1^2 + s2^2) / 2 / sum A), where s1 >= s2 are the Jacobian's singular values.
   // 1 when every chart is an isometry.
@@ -69,23 +90,29 @@ struct UnwrapResult {
   std::vector<uvec3> triangles;         // indices into the new vertices
   std::vector<vec2> uv1;                // per new vertex, in [0, 1]^2; max(extent) == 1
   std::vector<uint32_t> triangleChart;  // per triangle, chart index (degenerate: own index)
-  // World units per UV unit, the same everywhere: a UV length l is l x worldPerUv metres.
+  // World units per UV unit, the same in every chart but the sealed ones (shrunk): a UV
+  // length l is l x worldPerUv metres.
   double worldPerUv = 1.0;
   UnwrapStats stats;
 };
 
-// Generates lightmap UVs for `object` (world-space positions; normals, uv0 and uv1 are not
-// read). Deterministic: the same object and settings give bit-identical output. Thread-safe
-// (no shared state). Errors name the object: no triangles, an index out of range, or a
-// settings value out of range.
-Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings);
+// Generates lightmap UVs for `object` (world-space positions and normals; uv0 and uv1 are not
+// read). `sealed` (optional, one entry per triangle, 1 = no light reaches it) marks the
+// triangles that get charts of their own, shrunk when settings.shrinkSealed. Deterministic:
+// the same object and settings give bit-identical output. Thread-safe (no shared state).
+// Errors name the object: no triangles, an index out of range, or a settings value out of
+// range.
+Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSettings& settings,
+                                         const std::vector<uint8_t>* sealed = nullptr);
 
 // The object rebuilt on the unwrap's vertices: positions, normals and uv0 gathered through
 // vertexRemap, triangles and uv1 from the result; name, material and settings kept.
 Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 
 // For the bake: generates UVs for every lightmapped object (atlas.h isLightmapped) of the
-// scene that has no TEXCOORD_1, at texelsPerUnit = resolution x its scaleInLightmap (the
+// scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels),
+// with its sealed triangles found by rays over the scene's static objects when
+// settings.shrinkSealed, at texelsPerUnit = resolution x its scaleInLightmap (the
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,
 // per scene object, its unwrap (nullopt: kept its own UVs, or not lightmapped) so that the
 // output glTF writer can rebuild the primitives. Objects run in parallel; deterministic.

@@ -85,10 +85,11 @@ TEST(LightmapAtlas, TexelCountFollowsResolutionTimesScaleSquaredTimesArea) {
   EXPECT_FLOAT_EQ(layout->objects[0].texelsPerUnit, 10.0f);
   EXPECT_FLOAT_EQ(layout->objects[2].texelsPerUnit, 20.0f);
   ASSERT_EQ(layout->pages.size(), 1u);
-  // Items of w + padding (42, 22, 20) in a bin of page - padding: 42 + 22 > 62, so not
-  // 64 x 64; the next power-of-two candidate by area is 128 x 64.
-  EXPECT_EQ(layout->pages[0].width, 128);
-  EXPECT_EQ(layout->pages[0].height, 64);
+  // Items of w + padding (42 x 42, 22 x 22, 20 x 20) in a bin of page - padding: the
+  // smallest page puts the 42 alone in a row of width 44 - 2 and the 22 and the 20 on top
+  // (42 + 22 = 64, + 2 padding = 66, aligned to 68); side by side would need 86 x 44.
+  EXPECT_EQ(layout->pages[0].width, 44);
+  EXPECT_EQ(layout->pages[0].height, 68);
   expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
 }
 
@@ -109,6 +110,47 @@ TEST(LightmapAtlas, NotLightmappedObjectsGetNoPage) {
   EXPECT_EQ(layout->objects[zero].lightmapIndex, -1);
   EXPECT_EQ(layout->objects[dyn].lightmapIndex, -1);
   EXPECT_EQ(layout->objects[probe].lightmapIndex, -1);
+}
+
+TEST(LightmapAtlas, ObjectsTooSmallForALightmapAreProbeLit) {
+  // At 10 texels per unit a 1 x 1 quad gets 100 texels, a 0.3 x 0.3 quad 9 and a 0.3 x 0.3
+  // quad with scaleInLightmap 2 gets 36: with minObjectTexels 16, only the second is lit by
+  // probes, needs no UVs and gets no page.
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "big", 1.0f, 1.0f);
+  const uint32_t tiny = addFloor(scene, "tiny", 0.3f, 0.3f, 1.0f);
+  const uint32_t scaled = addFloor(scene, "scaled", 0.3f, 0.3f, 2.0f);
+  scene.objects[scaled].settings.scaleInLightmap = 2.0f;
+  scene.objects[tiny].uv1.clear();
+  EXPECT_NEAR(lightmapTexels(scene.objects[tiny], 10.0f), 9.0, 1e-4);
+  EXPECT_NEAR(lightmapTexels(scene.objects[scaled], 10.0f), 36.0, 1e-4);
+  AtlasSettings settings;
+  settings.resolution = 10.0f;
+  settings.minObjectTexels = 16.0f;
+  const auto layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_EQ(layout->objects[tiny].lightmapIndex, -1);
+  EXPECT_TRUE(layout->objects[tiny].probeLit);
+  EXPECT_EQ(layout->objects[0].lightmapIndex, 0);
+  EXPECT_EQ(layout->objects[scaled].lightmapIndex, 0);
+  EXPECT_FALSE(layout->objects[scaled].probeLit);
+  ASSERT_EQ(layout->warnings.size(), 1u);
+  EXPECT_NE(layout->warnings[0].find("'tiny'"), std::string::npos) << layout->warnings[0];
+  expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+  // Through the manifest and back, as --lock-atlas reads it: still probe-lit.
+  const auto back = atlasFromManifest(atlasToJson(*layout, scene), scene);
+  ASSERT_TRUE(back.ok()) << back.error();
+  EXPECT_TRUE(back->objects[tiny].probeLit);
+  EXPECT_EQ(back->objects[tiny].lightmapIndex, -1);
+  settings.locked = *back;
+  EXPECT_TRUE(packAtlas(scene, settings).ok());
+  // Off (0, the default): every object gets a page, and the one without UVs is an error.
+  settings.locked.reset();
+  settings.minObjectTexels = 0.0f;
+  const auto all = packAtlas(scene, settings);
+  ASSERT_FALSE(all.ok());
+  EXPECT_NE(all.error().find("'tiny'"), std::string::npos) << all.error();
 }
 
 TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {
@@ -132,6 +174,25 @@ TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {
               a->pages[0].width, a->pages[0].height, 100.0 * efficiency);
 }
 
+TEST(LightmapAtlas, EqualSquaresWithoutPaddingFillTheirPageExactly) {
+  // Unit quads at 8 texels per unit, no padding: 8 x 8 texels each. 16 fill 32 x 32 exactly
+  // (power-of-two pages did too); 12 fill 32 x 24 exactly, where the power-of-two candidates
+  // gave 32 x 32 (75% filled).
+  for (const int count : {16, 12}) {
+    Scene scene;
+    test::addMaterial(scene, test::lambert(vec3(0.5f)));
+    for (int i = 0; i < count; ++i) addFloor(scene, "quad" + std::to_string(i), 1.0f, 1.0f, float(i));
+    AtlasSettings settings;
+    settings.resolution = 8.0f;
+    settings.padding = 0;
+    const auto layout = packAtlas(scene, settings);
+    ASSERT_TRUE(layout.ok()) << layout.error();
+    ASSERT_EQ(layout->pages.size(), 1u);
+    EXPECT_EQ(layout->pages[0].width * layout->pages[0].height, count * 64) << count;
+    expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
+  }
+}
+
 TEST(LightmapAtlas, SmallMaxSizeGivesSeveralPages) {
   const Scene scene = assortedScene(40);
   AtlasSettings settings;
@@ -141,8 +202,8 @@ TEST(LightmapAtlas, SmallMaxSizeGivesSeveralPages) {
   ASSERT_TRUE(layout.ok()) << layout.error();
   EXPECT_GT(layout->pages.size(), 1u);
   for (const AtlasPage& p : layout->pages) {
-    EXPECT_EQ(p.width & (p.width - 1), 0) << p.width;  // powers of two
-    EXPECT_EQ(p.height & (p.height - 1), 0) << p.height;
+    EXPECT_TRUE(p.width % 4 == 0 || p.width == settings.maxSize) << p.width;  // 4 x 4 blocks
+    EXPECT_TRUE(p.height % 4 == 0 || p.height == settings.maxSize) << p.height;
   }
   expectValidLayout(scene, *layout, settings.padding, settings.maxSize);
   for (const AtlasObject& o : layout->objects) EXPECT_GE(o.lightmapIndex, 0);

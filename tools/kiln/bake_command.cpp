@@ -41,6 +41,7 @@ struct BakeOptions {
   std::optional<float> resolution;
   std::optional<int> maxSize;
   std::optional<int> padding;
+  std::optional<float> minObjectTexels;
   std::optional<int> bounces;
   std::optional<uint64_t> seed;
   int threads = 0;
@@ -136,6 +137,7 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
   Scene unwrapped = scene;
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
+  unwrap.minObjectTexels = settings.minObjectTexels;
   unwrap.showProgress = !o.quiet;
   unwrap.cancel = &cancelFlag();
   Result<std::vector<std::optional<UnwrapResult>>> uvs =
@@ -191,6 +193,7 @@ int runBake(const BakeOptions& o) {
   if (o.resolution) settings.resolution = *o.resolution;
   if (o.maxSize) settings.maxSize = *o.maxSize;
   if (o.padding) settings.padding = *o.padding;
+  if (o.minObjectTexels) settings.minObjectTexels = *o.minObjectTexels;
   if (o.bounces) settings.bounces = *o.bounces;
   if (o.seed) settings.seed = *o.seed;
   settings.threads = o.threads;
@@ -252,9 +255,13 @@ int runBake(const BakeOptions& o) {
     std::ostringstream line;
     line.setf(std::ios::fixed);
     line.precision(2);
+    int charts = 0;
+    for (const auto& u : result.unwraps) charts += u ? u->stats.chartCount : 0;
     line << "kiln: wrote " << o.out << ": " << result.layout.pages.size() << " lightmap page(s) ("
-         << pageTexels << " texels), " << st.texels << " baked texels (" << st.invalidTexels
-         << " invalid), " << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
+         << pageTexels << " texels, "
+         << (pageTexels > 0 ? 100.0 * double(st.texels) / double(pageTexels) : 0.0)
+         << "% baked), " << st.texels << " baked texels (" << st.invalidTexels << " invalid), "
+         << charts << " charts in generated UVs, " << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
          << humanCount(st.seconds > 0 ? double(st.rays) / st.seconds : 0.0)
          << " rays/s); total " << seconds << " s\n";
     std::cerr << line.str();
@@ -283,6 +290,11 @@ void registerBakeCommand(CLI::App& app) {
       ->check(CLI::Range(1e-6f, 1e5f));
   b->add_option("--max-size", o->maxSize, "Largest lightmap page side, texels (default 1024)")
       ->check(CLI::Range(1, 16384));
+  b->add_option("--min-object-texels", o->minObjectTexels,
+                "Objects whose surface would get fewer lightmap texels are lit by probes "
+                "instead, listed in a warning and the manifest (default 0 = never; 64-128 suits 25-64 "
+                "texels per unit)")
+      ->check(CLI::Range(0.0f, 1e9f));
   b->add_option("--padding", o->padding, "Empty texels around every object (default 2)")
       ->check(CLI::Range(0, 256));
   b->add_option("--bounces", o->bounces, "Bounce cap (default 64; Russian roulette)")
