@@ -58,7 +58,7 @@ constexpr uint32_t kFloorSamples = 16;
 constexpr uint32_t kEnclosureRays = 32;
 // Light batches per texel: the spread of batch means estimates each texel's variance for
 // the denoiser (the batches together are exactly the full estimate).
-constexpr uint32_t kVarianceBatches = 4;
+constexpr uint32_t kVarianceBatches = 16;
 // Push-out: rays in 8 directions of the surface's tangent plane, reaching this many texel
 // edges, repeated this many times (a point in a corner of two solids needs two moves).
 constexpr int kPushDirections = 8;
@@ -724,6 +724,9 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     }
   }
   result.valid = page.valid;
+  result.samples.assign(n, 0);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (texels[i].page == pageIndex) result.samples[texels[i].index] = light[i].samples;
   if (settings.coverageMap) {
     result.coverage = Image(w, h, 1);
     for (size_t i = 0; i < texels.size(); ++i)
@@ -962,7 +965,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
       cancelled(cancel))
     return Error{"cancelled"};
   std::string footprintError;
-  if (!footprintStage(pages, texels, result.scene, result.layout, **tracer,
+  if (settings.footprintGrid &&
+      !footprintStage(pages, texels, result.scene, result.layout, **tracer,
                       settings.supersampling, showProgress, parallel, rays, footprintError) ||
       cancelled(cancel))
     return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};

@@ -91,6 +91,11 @@ struct LightmapBakeSettings {
   // Post.
   bool denoise = true;
   bool stitchSeams = true;
+  // Hidden-edge texels (lightmap_baker.cpp, footprintStage): texels next to geometry get a
+  // 4 x 4 grid of points over their footprint, and the points inside a solid are left out of
+  // their value. Off by default: a grid texel straddling a thin wall still mixes the light
+  // of both sides (two_rooms), and one whose remaining points are all inside turns invalid.
+  bool footprintGrid = false;
   // Keep each page's visible footprint coverage (LightmapPageResult::coverage).
   bool coverageMap = false;
   // Execution.
@@ -128,6 +133,8 @@ struct LightmapPageResult {
   // whole footprint with hidden points counted as 0 (what a renderer that bakes hidden
   // surface points black, such as Cycles, stores): tools/lightmap_compare uses it.
   Image coverage;
+  // W x H: paths each covered texel took (0 for padding); with adaptive sampling they differ.
+  std::vector<uint32_t> samples;
   // W x H x 3: world position of each covered texel's main sample point after push-out
   // (the point whose light the texel holds when supersampling is 1); 0 for padding. For
   // tests, debugging and the reference comparison.

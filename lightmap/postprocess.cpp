@@ -353,8 +353,63 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
 
   const Image input = page.radiance;
   Image src = page.radiance, dst = page.radiance;
+  // Pair weight of texels p and q (q at a 5x5 à-trous tap of p), symmetric in p and q:
+  // B3 kernel x geometric guides (the smaller of the two directions) x a Gaussian in the
+  // luminance difference over its own standard error, sqrt(var_p + var_q): neighbours whose
+  // difference the noise explains mix, differences the noise does not explain (edges,
+  // gradients resolved by the samples) stop the filter. As the variance falls, so does every
+  // weight: the filter fades out where the estimate is already converged.
+  std::vector<float> lum(n, 0.0f), rowWeight(n, 0.0f);
   for (int pass = 0; pass < settings.iterations; ++pass) {
     const int step = 1 << pass;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) lum[size_t(y) * w + x] = texelLuminance(src, x, y);
+    auto pairWeight = [&](int x, int y, int kx, int ky, size_t i, size_t j) -> float {
+      const int qx = x + (kx - 2) * step, qy = y + (ky - 2) * step;
+      float wq = kB3[kx] * kB3[ky];
+      wq *= std::min(g.geometric(x, y, qx, qy), g.geometric(qx, qy, x, y));
+      if (wq <= 0.0f) return 0.0f;
+      const float d = lum[j] - lum[i];
+      const float v = var[i] + var[j];
+      const float k = settings.sigmaLuminance;
+      if (!(v > 0.0f)) return d == 0.0f ? wq : 0.0f;
+      return wq * std::exp(-0.5f * d * d / (k * k * v));
+    };
+    auto forEachTap = [&](int x, int y, auto&& f) {
+      const size_t i = size_t(y) * w + x;
+      for (int ky = 0; ky < 5; ++ky) {
+        const int qy = y + (ky - 2) * step;
+        if (qy < 0 || qy >= h) continue;
+        for (int kx = 0; kx < 5; ++kx) {
+          const int qx = x + (kx - 2) * step;
+          if (qx < 0 || qx >= w || (kx == 2 && ky == 2)) continue;
+          const size_t j = size_t(qy) * w + qx;
+          if (!page.valid[j] || !g.sameObject(i, j)) continue;
+          f(kx, ky, j);
+        }
+      }
+    };
+    // Each texel's total weight (its own B3 weight included).
+    parallelFor(
+        size_t(h),
+        [&](size_t begin, size_t end) {
+          for (size_t yy = begin; yy < end; ++yy)
+            for (int x = 0; x < w; ++x) {
+              const int y = int(yy);
+              const size_t i = size_t(y) * w + x;
+              if (!page.valid[i]) continue;
+              double total = double(kB3[2]) * kB3[2];
+              forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                total += pairWeight(x, y, kx, ky, i, j);
+              });
+              rowWeight[i] = float(total);
+            }
+        },
+        rows);
+    // out_p = x_p + sum_q a_pq (x_q - x_p), a_pq = w_pq / max(W_p, W_q): a is symmetric, so
+    // the texels' sum (their mean) is kept exactly, and sum_q a_pq < 1, so out_p is a convex
+    // combination of non-negative values with a positive share of x_p: never negative, and
+    // never 0 where x_p > 0.
     parallelFor(
         size_t(h),
         [&](size_t begin, size_t end) {
@@ -364,35 +419,22 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
             for (int x = 0; x < w; ++x) {
               const size_t i = size_t(y) * w + x;
               if (!page.valid[i]) continue;  // dst already holds the input value
-              const float lp = texelLuminance(src, x, y);
-              const float sl = settings.sigmaLuminance * std::sqrt(var[i]);
+              const float* p = src.at(x, y);
               std::fill(sum.begin(), sum.end(), 0.0);
-              double weight = 0.0, weightedVar = 0.0;
-              for (int ky = 0; ky < 5; ++ky) {
-                const int qy = y + (ky - 2) * step;
-                if (qy < 0 || qy >= h) continue;
-                for (int kx = 0; kx < 5; ++kx) {
-                  const int qx = x + (kx - 2) * step;
-                  if (qx < 0 || qx >= w) continue;
-                  const size_t j = size_t(qy) * w + qx;
-                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
-                  float wq = kB3[kx] * kB3[ky];
-                  if (j != i) {
-                    wq *= g.geometric(x, y, qx, qy);
-                    const float dl = std::abs(texelLuminance(src, qx, qy) - lp);
-                    // sl == 0 (a noise-free texel): only equal luminance mixes.
-                    wq *= sl > 0.0f ? std::exp(-dl / sl) : (dl == 0.0f ? 1.0f : 0.0f);
-                    if (wq <= 0.0f) continue;
-                  }
-                  const float* q = src.at(qx, qy);
-                  for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += double(wq) * q[ch];
-                  weight += wq;
-                  weightedVar += double(wq) * wq * var[j];
-                }
-              }
+              double share = 0.0, outVar = 0.0;
+              forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                const float wq = pairWeight(x, y, kx, ky, i, j);
+                if (wq <= 0.0f) return;
+                const double a = double(wq) / double(std::max(rowWeight[i], rowWeight[j]));
+                const float* q = src.pixels.data() + j * size_t(c);
+                for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += a * (double(q[ch]) - p[ch]);
+                share += a;
+                outVar += a * a * var[j];
+              });
               float* out = dst.at(x, y);
-              for (int ch = 0; ch < c; ++ch) out[ch] = float(sum[size_t(ch)] / weight);
-              nextVar[i] = float(weightedVar / (weight * weight));
+              for (int ch = 0; ch < c; ++ch)
+                out[ch] = float(std::max(0.0, double(p[ch]) + sum[size_t(ch)]));
+              nextVar[i] = float(outVar + (1.0 - share) * (1.0 - share) * var[i]);
             }
           }
         },

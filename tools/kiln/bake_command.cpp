@@ -40,6 +40,7 @@ struct BakeOptions {
   std::optional<int> samples;
   std::optional<float> errorTarget;
   bool coverageMap = false;
+  bool footprintGrid = false;
   std::optional<float> resolution;
   std::optional<int> maxSize;
   std::optional<int> padding;
@@ -196,6 +197,7 @@ int runBake(const BakeOptions& o) {
   }
   if (o.errorTarget) settings.errorTarget = *o.errorTarget;
   if (o.coverageMap) settings.coverageMap = true;
+  if (o.footprintGrid) settings.footprintGrid = true;
   if (o.resolution) settings.resolution = *o.resolution;
   if (o.maxSize) settings.maxSize = *o.maxSize;
   if (o.padding) settings.padding = *o.padding;
@@ -298,6 +300,9 @@ void registerBakeCommand(CLI::App& app) {
                 "Adaptive sampling: each texel takes paths until the standard error of its "
                 "mean is at most this share of its value (plus a floor); 0 = off")
       ->check(CLI::Range(0.0f, 1.0f));
+  b->add_flag("--footprint-grid", o->footprintGrid,
+              "Texels next to geometry average the visible part of their footprint (4 x 4 "
+              "points; experimental: mixes both sides of thin walls)");
   b->add_flag("--coverage-map", o->coverageMap,
               "Also write lightmap-<i>_coverage.exr: the visible share of each texel's "
               "footprint (for comparisons with renderers that bake hidden points black)");
