@@ -44,6 +44,19 @@ ErrorSums compareBakes(const LightmapBakeResult& a, const LightmapBakeResult& re
   return s;
 }
 
+// One bake of `scene` (loaded from `path`), its wall time in *seconds; advances `progress`.
+Result<LightmapBakeResult> timedLightmapBake(const Scene& scene, const std::string& path,
+                                            const LightmapBakeSettings& settings,
+                                            const std::atomic<bool>* cancel, Progress& progress,
+                                            double* seconds) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Result<LightmapBakeResult> r = bakeLightmaps(scene, settings, false, cancel);
+  *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  progress.advance();
+  if (!r) return Error{path + ": " + r.error()};
+  return r;
+}
+
 }  // namespace
 
 Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
@@ -67,14 +80,8 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
 
   Progress progress("chart lightmap", 1 + samples.size() * denoised.size() * size_t(repeats),
                     "bakes", o.progress);
-  auto timedBake = [&](const LightmapBakeSettings& settings,
-                       double* seconds) -> Result<LightmapBakeResult> {
-    const auto t0 = std::chrono::steady_clock::now();
-    Result<LightmapBakeResult> r = bakeLightmaps(*scene, settings, false, o.cancel);
-    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    progress.advance();
-    if (!r) return Error{path + ": " + r.error()};
-    return r;
+  auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
+    return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
 
   // The reference: the same bake with 16x the largest sample count and an independent seed,
@@ -204,14 +211,8 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
   const int repeats = o.quick ? 1 : 3;
   Progress progress("chart adaptive", 1 + (counts.size() + targets.size()) * size_t(repeats),
                     "bakes", o.progress);
-  auto timedBake = [&](const LightmapBakeSettings& settings,
-                       double* seconds) -> Result<LightmapBakeResult> {
-    const auto t0 = std::chrono::steady_clock::now();
-    Result<LightmapBakeResult> r = bakeLightmaps(*scene, settings, false, o.cancel);
-    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    progress.advance();
-    if (!r) return Error{path + ": " + r.error()};
-    return r;
+  auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
+    return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
   LightmapBakeSettings refSettings = s;
   refSettings.denoise = false;
