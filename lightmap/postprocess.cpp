@@ -5,6 +5,8 @@
 // the input buffer alone, so rows can run in parallel and results never depend on threads.
 #include "lightmap/postprocess.h"
 
+#include "src/sampling.h"
+
 #include <algorithm>
 #include <array>
 #include <cassert>
@@ -176,6 +178,90 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
   return size;
 }
 
+// Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
+constexpr float kDivergenceStep = 0.02f;
+// The safeguard window: (2r + 1)^2 texels.
+constexpr int kSafeguardRadius = 3;
+
+// The safeguard: per texel, the share a of the filtered value f in the output
+// x + a (f - x) (x the raw value) that minimises the expected squared error. With e the
+// raw texel's noise (variance s2), f = truth + b + e_f (b the filter's bias, from blurred
+// gradients; c = cov(e_f, e)) and d = f - x, the error of the output is e + a (b + e_f - e)
+// and its mean square is smallest at a = (s2 - c) / E[d^2] (a Wiener / SURE-style
+// shrinkage). E[d^2] = b^2 + var(d) is measured: the mean of d^2 over the texel's
+// geometrically compatible neighbours of its object in a 7x7 window (one texel's d^2 alone
+// is too noisy a guess; the bias of a blurred gradient is smooth across a few texels). Where the filter
+// only removed noise, d^2 ~ s2 - 2c and a ~ 1; where it moved a texel by much more than the
+// texel's own standard error, the difference is signal and a -> 0 (the raw value stays).
+// s2 is the 3x3 mean of the texels' variance too, so that a texel whose few paths all
+// agreed (variance estimate 0) still trusts its neighbours as much as they do; c ~ self x s2
+// with `self` the texel's share of its own input in f.
+std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Image& filtered,
+                                    const std::vector<float>& sigma,
+                                    const std::vector<float>& divergence,
+                                    const ParallelOptions& rows) {
+  const LightmapPage& page = g.page;
+  const int w = page.width(), h = page.height();
+  std::vector<float> d2(page.texelCount(), 0.0f), blend(page.texelCount(), 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float d = texelLuminance(filtered, x, y) - texelLuminance(raw, x, y);
+      d2[size_t(y) * w + x] = d * d;
+    }
+  parallelFor(
+      size_t(h),
+      [&](size_t begin, size_t end) {
+        for (size_t yy = begin; yy < end; ++yy) {
+          const int y = int(yy);
+          for (int x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            if (!page.valid[i]) continue;
+            double sumD2 = 0.0, gain = 0.0;
+            for (int dy = -kSafeguardRadius; dy <= kSafeguardRadius; ++dy)
+              for (int dx = -kSafeguardRadius; dx <= kSafeguardRadius; ++dx) {
+                const int qx = x + dx, qy = y + dy;
+                if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+                const size_t j = size_t(qy) * w + qx;
+                if (!page.valid[j] || !g.sameObject(i, j)) continue;
+                if (j != i && g.geometric(x, y, qx, qy) < 0.5f) continue;
+                sumD2 += d2[j];
+                gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
+              }
+            blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
+          }
+        }
+      },
+      rows);
+  return blend;
+}
+
+// Scales each object's valid texels, per channel, so that their sum is the raw sum again:
+// the per-texel blend of the safeguard does not keep it exactly (the filter alone does).
+// A factor > 0 keeps every texel non-negative and keeps texels > 0 above 0.
+void restoreObjectSums(LightmapPage& page, const Image& raw) {
+  const int c = page.radiance.channels;
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  std::vector<double> rawSum(size_t(objects) * c, 0.0), outSum(size_t(objects) * c, 0.0);
+  for (size_t i = 0; i < page.texelCount(); ++i) {
+    if (!page.valid[i] || objectOf(i) < 0) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      rawSum[o] += raw.pixels[k];
+      outSum[o] += page.radiance.pixels[k];
+    }
+  }
+  for (size_t i = 0; i < page.texelCount(); ++i) {
+    if (!page.valid[i] || objectOf(i) < 0) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      if (outSum[o] > 0.0)
+        page.radiance.pixels[k] = float(double(page.radiance.pixels[k]) * rawSum[o] / outSum[o]);
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<uint8_t> dilate(Image& image, const std::vector<uint8_t>& valid, int iterations,
@@ -345,14 +431,14 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       if (page.valid[i] && !estimated[i]) sigma[i] = mean;
   }
 
+  // The à-trous passes over `in` (page.radiance or a perturbed copy): the filtered image.
+  auto filter = [&](const Image& in) -> Image {
   // Variance of each texel's current value, carried through the passes as SVGF does: a
   // weighted mean with weights w has variance sum(w^2 var) / (sum w)^2 (neighbours taken as
   // independent), so the luminance threshold shrinks as the noise does.
   std::vector<float> var(n), nextVar(n, 0.0f);
   for (size_t i = 0; i < n; ++i) var[i] = sigma[i] * sigma[i];
-
-  const Image input = page.radiance;
-  Image src = page.radiance, dst = page.radiance;
+  Image src = in, dst = in;
   // Pair weight of texels p and q (q at a 5x5 à-trous tap of p), symmetric in p and q:
   // B3 kernel x geometric guides (the smaller of the two directions) x a Gaussian in the
   // luminance difference over its own standard error, sqrt(var_p + var_q): neighbours whose
@@ -442,14 +528,44 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     std::swap(src, dst);
     std::swap(var, nextVar);
   }
+  return src;
+  };
 
-  if (settings.strength >= 1.0f) {
-    page.radiance = std::move(src);
-    return;
+  const Image input = page.radiance;
+  const Image filtered = filter(input);
+  // The divergence of the filter, d f_p / d x_p, by a Monte-Carlo perturbation (Ramani et al.
+  // 2008, "Monte-Carlo SURE"): every texel's luminance moves by eps_p b_p, b_p = +-1 from a
+  // hash of its index, and b_p (f'_p - f_p) / eps_p estimates it (the cross terms
+  // b_p b_q d f_p / d x_q average out over the safeguard's window). eps_p is a small
+  // fraction of the texel's noise, where the weights' dependence on the values lives.
+  Image perturbed = input;
+  std::vector<float> eps(n, 0.0f);
+  for (size_t i = 0; i < n; ++i) {
+    if (!page.valid[i]) continue;
+    const float x = texelLuminance(input, int(i % size_t(w)), int(i / size_t(w)));
+    eps[i] = std::max(kDivergenceStep * sigma[i], 1e-5f * std::max(x, 1e-3f));
+    if (mixBits(i + 1) & 1) eps[i] = -eps[i];
+    for (int ch = 0; ch < std::min(c, 3); ++ch) perturbed.pixels[i * size_t(c) + size_t(ch)] += eps[i];
   }
-  for (size_t k = 0; k < input.pixels.size(); ++k)
-    page.radiance.pixels[k] =
-        input.pixels[k] + settings.strength * (src.pixels[k] - input.pixels[k]);
+  const Image moved = filter(perturbed);
+  std::vector<float> divergence(n, 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t i = size_t(y) * w + x;
+      if (page.valid[i])
+        divergence[i] = (texelLuminance(moved, x, y) - texelLuminance(filtered, x, y)) / eps[i];
+    }
+  const Image& src = filtered;
+
+  const std::vector<float> blend = safeguardWeights(g, input, src, sigma, divergence, rows);
+  for (size_t i = 0; i < n; ++i) {
+    const float a = settings.strength * blend[i];
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch);
+      page.radiance.pixels[k] = input.pixels[k] + a * (src.pixels[k] - input.pixels[k]);
+    }
+  }
+  restoreObjectSums(page, input);
 }
 
 }  // namespace kiln

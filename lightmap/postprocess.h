@@ -97,7 +97,8 @@ struct DenoiseSettings {
   // through the passes as SVGF does, Schied et al. 2017). Differences the noise explains
   // mix; the filter fades out as the variance falls, so it does not blur converged light.
   float sigmaLuminance = 1.5f;
-  // Blend between input (0) and fully filtered (1). 0 returns the page unchanged bit for bit.
+  // Blend between input (0) and the safeguarded filter output (1). 0 returns the page
+  // unchanged bit for bit.
   float strength = 1.0f;
   ParallelOptions parallel;
 };
@@ -112,7 +113,16 @@ struct DenoiseSettings {
 // so a texel is a convex combination that keeps a positive share of itself: never negative,
 // never 0 where it was > 0. Only valid texels contribute and change; objects never mix. All
 // channels move with the weights of the luminance of the first three (or the first, for grey
-// images). Deterministic at any thread count.
+// images).
+// Then a safeguard, so that the filter does not add error where it blurs light the samples
+// resolved (a gradient along which the luminance weights still mix): each texel becomes
+// x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
+// unbiased risk estimate over a 7x7 window of its object, a = sum var_q (1 - div_q) /
+// sum (f_q - x_q)^2, div = d f_q / d x_q estimated by filtering a perturbed copy once more
+// (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
+// moved texels by more than their noise explains a -> 0. Each object's sum per channel is
+// then restored by one factor (> 0: no texel turns negative or 0). Costs two filter runs.
+// Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
 
 }  // namespace kiln

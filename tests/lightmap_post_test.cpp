@@ -380,16 +380,12 @@ TEST(LightmapDenoise, NeverIncreasesTheErrorAndKeepsTheMeanAtAnyNoiseLevel) {
     const FieldError before = fieldError(page);
     denoise(page);
     const FieldError after = fieldError(page);
-    std::printf("noise %.3f: relative RMSE %.5f -> %.5f, sum ratio %.7f\n", rel, before.rmse,
+    std::printf("noise %.3f: relative RMSE %.7f -> %.7f, sum ratio %.7f\n", rel, before.rmse,
                 after.rmse, after.sum / before.sum);
-    // Down to 1% noise the filter lowers the error. Below it (0.3%, 0.1%: a converged bake)
-    // the wave's curvature across the kernel costs more than the noise it removes: measured
-    // +7% and +5% of the (tiny) error. Not yet "never increases the error" (issue 17): the
-    // bound holds that shortfall where it is, so that it cannot grow unnoticed.
-    if (rel >= 0.01)
-      EXPECT_LE(after.rmse, before.rmse) << rel;
-    else
-      EXPECT_LE(after.rmse, 1.1 * before.rmse) << rel;
+    // The safeguard keeps each texel's raw value where the filter moved it by more than
+    // its noise explains (the wave's curvature at 0.3% and 0.1% noise): never worse, to
+    // float rounding.
+    EXPECT_LE(after.rmse, before.rmse * (1.0 + 1e-6)) << rel;
     EXPECT_NEAR(after.sum / before.sum, 1.0, 1e-5) << rel;
   }
 }
