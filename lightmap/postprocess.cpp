@@ -106,6 +106,23 @@ struct Guides {
     return page.objectId.empty() || page.objectId[i] == page.objectId[j];
   }
 
+  // Calls f(j) for every valid texel j of p's object in the (2r + 1)^2 window around
+  // (x, y) that is geometrically close to p (the guide weight at least 1/2), p included.
+  template <class F>
+  void forEachCompatible(int x, int y, int r, F&& f) const {
+    const int w = page.width(), h = page.height();
+    const size_t i = size_t(y) * w + x;
+    for (int dy = -r; dy <= r; ++dy)
+      for (int dx = -r; dx <= r; ++dx) {
+        const int qx = x + dx, qy = y + dy;
+        if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+        const size_t j = size_t(qy) * w + qx;
+        if (!page.valid[j] || !sameObject(i, j)) continue;
+        if (j != i && geometric(x, y, qx, qy) < 0.5f) continue;
+        f(j);
+      }
+  }
+
   // Product of the normal and position weights between p and q, q at texel offset
   // (ox, oy) from p.
   float geometric(int px, int py, int qx, int qy) const {
@@ -217,16 +234,10 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
             const size_t i = size_t(y) * w + x;
             if (!page.valid[i]) continue;
             double sumD2 = 0.0, gain = 0.0;
-            for (int dy = -kSafeguardRadius; dy <= kSafeguardRadius; ++dy)
-              for (int dx = -kSafeguardRadius; dx <= kSafeguardRadius; ++dx) {
-                const int qx = x + dx, qy = y + dy;
-                if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
-                const size_t j = size_t(qy) * w + qx;
-                if (!page.valid[j] || !g.sameObject(i, j)) continue;
-                if (j != i && g.geometric(x, y, qx, qy) < 0.5f) continue;
-                sumD2 += d2[j];
-                gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
-              }
+            g.forEachCompatible(x, y, kSafeguardRadius, [&](size_t j) {
+              sumD2 += d2[j];
+              gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
+            });
             blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
           }
         }
@@ -401,15 +412,10 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
               if (!page.valid[i]) continue;
               std::array<float, 9> lum;
               int count = 0;
-              for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                  const int qx = x + dx, qy = y + dy;
-                  if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
-                  const size_t j = size_t(qy) * w + qx;
-                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
-                  if (g.geometric(x, y, qx, qy) < 0.5f) continue;
-                  lum[size_t(count++)] = texelLuminance(page.radiance, qx, qy);
-                }
+              g.forEachCompatible(x, y, 1, [&](size_t j) {
+                lum[size_t(count++)] = texelLuminance(page.radiance, int(j % size_t(w)),
+                                                      int(j / size_t(w)));
+              });
               if (count < 3) continue;
               const float med = median(lum.data(), count);
               for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
