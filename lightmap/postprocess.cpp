@@ -198,7 +198,7 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
 // Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
 constexpr float kDivergenceStep = 0.02f;
 // The safeguard window: (2r + 1)^2 texels.
-constexpr int kSafeguardRadius = 3;
+constexpr int kSafeguardRadius = 5;
 
 // The safeguard: per texel, the share a of the filtered value f in the output
 // x + a (f - x) (x the raw value) that minimises the expected squared error. With e the
@@ -206,7 +206,7 @@ constexpr int kSafeguardRadius = 3;
 // gradients; c = cov(e_f, e)) and d = f - x, the error of the output is e + a (b + e_f - e)
 // and its mean square is smallest at a = (s2 - c) / E[d^2] (a Wiener / SURE-style
 // shrinkage). E[d^2] = b^2 + var(d) is measured: the mean of d^2 over the texel's
-// geometrically compatible neighbours of its object in a 7x7 window (one texel's d^2 alone
+// geometrically compatible neighbours of its object in an 11x11 window (one texel's d^2 alone
 // is too noisy a guess; the bias of a blurred gradient is smooth across a few texels). Where the filter
 // only removed noise, d^2 ~ s2 - 2c and a ~ 1; where it moved a texel by much more than the
 // texel's own standard error, the difference is signal and a -> 0 (the raw value stays).
@@ -537,40 +537,72 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   return src;
   };
 
+  // The divergence of an operator `op` on the page, d op(x)_p / d x_p, by a Monte-Carlo
+  // perturbation (Ramani et al. 2008, "Monte-Carlo SURE"): every texel's luminance moves by
+  // eps_p b_p, b_p = +-1 from a hash of its index and `salt`, and b_p (op(x + eps b)_p -
+  // op(x)_p) / eps_p estimates it (the cross terms b_p b_q d op_p / d x_q average out over
+  // a window). eps_p is a small fraction of the texel's noise, where the weights'
+  // dependence on the values lives.
+  auto divergenceOf = [&](const Image& in, const Image& out, uint64_t salt, auto&& op) {
+    Image perturbed = in;
+    std::vector<float> eps(n, 0.0f), div(n, 0.0f);
+    for (size_t i = 0; i < n; ++i) {
+      if (!page.valid[i]) continue;
+      const float x = texelLuminance(in, int(i % size_t(w)), int(i / size_t(w)));
+      eps[i] = std::max(kDivergenceStep * sigma[i], 1e-5f * std::max(x, 1e-3f));
+      if (mixBits(hashValues(salt, i)) & 1) eps[i] = -eps[i];
+      for (int ch = 0; ch < std::min(c, 3); ++ch)
+        perturbed.pixels[i * size_t(c) + size_t(ch)] += eps[i];
+    }
+    const Image moved = op(perturbed);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const size_t i = size_t(y) * w + x;
+        if (page.valid[i])
+          div[i] = (texelLuminance(moved, x, y) - texelLuminance(out, x, y)) / eps[i];
+      }
+    return div;
+  };
+  // The filter, then the per-texel safeguard (safeguardWeights) on `in`.
+  auto safeguarded = [&](const Image& in) {
+    const Image filtered = filter(in);
+    const std::vector<float> blend = safeguardWeights(
+        g, in, filtered, sigma, divergenceOf(in, filtered, 1, filter), rows);
+    Image out = in;
+    for (size_t i = 0; i < n; ++i) {
+      const float a = settings.strength * blend[i];
+      for (int ch = 0; ch < c; ++ch) {
+        const size_t k = i * size_t(c) + size_t(ch);
+        out.pixels[k] = in.pixels[k] + a * (filtered.pixels[k] - in.pixels[k]);
+      }
+    }
+    return out;
+  };
   const Image input = page.radiance;
-  const Image filtered = filter(input);
-  // The divergence of the filter, d f_p / d x_p, by a Monte-Carlo perturbation (Ramani et al.
-  // 2008, "Monte-Carlo SURE"): every texel's luminance moves by eps_p b_p, b_p = +-1 from a
-  // hash of its index, and b_p (f'_p - f_p) / eps_p estimates it (the cross terms
-  // b_p b_q d f_p / d x_q average out over the safeguard's window). eps_p is a small
-  // fraction of the texel's noise, where the weights' dependence on the values lives.
-  Image perturbed = input;
-  std::vector<float> eps(n, 0.0f);
-  for (size_t i = 0; i < n; ++i) {
-    if (!page.valid[i]) continue;
-    const float x = texelLuminance(input, int(i % size_t(w)), int(i / size_t(w)));
-    eps[i] = std::max(kDivergenceStep * sigma[i], 1e-5f * std::max(x, 1e-3f));
-    if (mixBits(i + 1) & 1) eps[i] = -eps[i];
-    for (int ch = 0; ch < std::min(c, 3); ++ch) perturbed.pixels[i * size_t(c) + size_t(ch)] += eps[i];
-  }
-  const Image moved = filter(perturbed);
-  std::vector<float> divergence(n, 0.0f);
+  page.radiance = safeguarded(input);
+  // Per object, Stein's estimate of the whole result's risk against the raw texels' risk
+  // (sum var): SURE(out) - sum var = sum (out - x)^2 + 2 var (div - 1) over the object's
+  // valid texels, div that of the whole filter-and-safeguard. Where the estimate says the
+  // result is not better than the raw texels (a converged object where choosing the blend
+  // from noisy local estimates costs more than the filter gains), the object keeps its raw
+  // texels. A decision over a whole object averages the noise of hundreds of texels.
+  const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  std::vector<double> excess(size_t(objects), 0.0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const size_t i = size_t(y) * w + x;
-      if (page.valid[i])
-        divergence[i] = (texelLuminance(moved, x, y) - texelLuminance(filtered, x, y)) / eps[i];
+      if (!page.valid[i] || objectOf(i) < 0) continue;
+      const double d = texelLuminance(page.radiance, x, y) - texelLuminance(input, x, y);
+      excess[size_t(objectOf(i))] +=
+          d * d + 2.0 * double(sigma[i]) * sigma[i] * (double(div[i]) - 1.0);
     }
-  const Image& src = filtered;
-
-  const std::vector<float> blend = safeguardWeights(g, input, src, sigma, divergence, rows);
-  for (size_t i = 0; i < n; ++i) {
-    const float a = settings.strength * blend[i];
-    for (int ch = 0; ch < c; ++ch) {
-      const size_t k = i * size_t(c) + size_t(ch);
-      page.radiance.pixels[k] = input.pixels[k] + a * (src.pixels[k] - input.pixels[k]);
-    }
-  }
+  for (size_t i = 0; i < n; ++i)
+    if (page.valid[i] && objectOf(i) >= 0 && excess[size_t(objectOf(i))] >= 0.0)
+      for (int ch = 0; ch < c; ++ch)
+        page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
   restoreObjectSums(page, input);
 }
 

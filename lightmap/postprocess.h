@@ -117,12 +117,14 @@ struct DenoiseSettings {
 // Then a safeguard, so that the filter does not add error where it blurs light the samples
 // resolved (a gradient along which the luminance weights still mix): each texel becomes
 // x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
-// unbiased risk estimate over a 7x7 window of its object, a = sum var_q (1 - div_q) /
-// sum (f_q - x_q)^2, div = d f_q / d x_q estimated by filtering a perturbed copy once more
+// unbiased risk estimate (SURE) over an 11x11 window of its object, a = sum var_q (1 - div_q)
+// / sum (f_q - x_q)^2, div = d f_q / d x_q estimated by filtering a perturbed copy once more
 // (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
-// moved texels by more than their noise explains a -> 0. Each object's sum per channel is
-// then restored by one factor (> 0: no texel turns negative or 0). Costs two filter runs.
-// Deterministic at any thread count.
+// moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
+// result (its divergence again by perturbation) against the raw texels' risk (sum var): an
+// object the estimate does not find better keeps its raw texels. Last, each object's sum
+// per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
+// filter runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
 
 }  // namespace kiln
