@@ -59,6 +59,9 @@ constexpr uint32_t kEnclosureRays = 32;
 // Light batches per texel: the spread of batch means estimates each texel's variance for
 // the denoiser (the batches together are exactly the full estimate).
 constexpr uint32_t kVarianceBatches = 16;
+// Batches per group for the coarse variance estimate (TexelLight::varianceCoarse).
+constexpr uint32_t kGroupBatches = 4;
+constexpr uint32_t kQmcMinPaths = 4 * kVarianceBatches;
 // Push-out: rays in 8 directions of the surface's tangent plane, reaching this many texel
 // edges, repeated this many times (a point in a corner of two solids needs two moves).
 constexpr int kPushDirections = 8;
@@ -301,6 +304,10 @@ bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>&
 struct TexelLight {
   vec3 value{0.0f};       // E / pi over the texel's valid points
   float variance = 0.0f;  // of the luminance of `value` (from batch means)
+  // The same from the means of groups of kGroupBatches consecutive batches (4x the paths
+  // each): with quasi-Monte Carlo its ratio to `variance` measures how much faster than
+  // 1 / N the error falls (qmcVarianceFactor).
+  float varianceCoarse = 0.0f;
   float ao = 1.0f;
   vec4 shadowmask{1.0f};  // per channel: visible fraction of that channel's light
   vec4 direction{0.5f, 0.5f, 0.5f, 0.5f};  // encodeDominantDirection
@@ -597,8 +604,50 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
       count += nb;
     }
     out.variance = float(ss / double(batches.size() - 1) / count);
+    // Groups of kGroupBatches consecutive batches: each round's batches are slices in
+    // order, so a group is again one contiguous, aligned slice of every point's share.
+    std::vector<std::pair<double, double>> groups;  // (luminance sum, paths)
+    for (size_t b = 0; b < batches.size(); ++b) {
+      if (b % kGroupBatches == 0) groups.push_back({0.0, 0.0});
+      groups.back().first += batches[b].first * batches[b].second;
+      groups.back().second += batches[b].second;
+    }
+    if (groups.size() >= 2) {
+      double gss = 0.0;
+      for (const auto& [sum, nb] : groups) {
+        const double m = sum / nb;
+        gss += nb * (m - mean) * (m - mean);
+      }
+      out.varianceCoarse = float(gss / double(groups.size() - 1) / count);
+    }
   }
   return out;
+}
+
+// Batch means estimate a texel's variance as if its error fell as 1 / N (plain Monte
+// Carlo). The paths are a scrambled Sobol sequence, whose error can fall faster (up to
+// N^-1.5 for smooth 2D integrands such as direct light from an area light): batches of
+// N / 16 paths then spread more than the full N's error implies, and the
+// estimate is too large. With var(n) ~ n^-g, the estimates from batches (N / B paths) and
+// from groups of kGroupBatches batches agree when g = 1, and otherwise differ by
+// q = coarse / fine = kGroupBatches^(1 - g); extrapolating from the groups to the whole
+// (B / kGroupBatches = kGroupBatches times more paths) multiplies by q once more: the
+// corrected variance is fine x q^2. q is taken over the page (a per-texel ratio of two
+// estimates from 16 and 4 means is too noisy), clamped to [1/4, 1] (1 <= g <= 2), and over
+// the texels with at least kQmcMinPaths paths (4 per batch: with fewer, a batch is a
+// handful of paths, not a slice of a net, and the ratio says nothing about the rate).
+float qmcVarianceFactor(const std::vector<TexelRef>& texels, const std::vector<TexelLight>& light,
+                        uint32_t pageIndex) {
+  double fine = 0.0, coarse = 0.0;
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (texels[i].page == pageIndex && light[i].valid &&
+        light[i].samples >= kQmcMinPaths) {
+      fine += light[i].variance;
+      coarse += light[i].varianceCoarse;
+    }
+  if (!(fine > 0.0)) return 1.0f;
+  const double q = std::clamp(coarse / fine, 0.25, 1.0);
+  return float(q * q);
 }
 
 // The scene's mean texel luminance (E / pi), for the adaptive error floor: kFloorSamples
@@ -700,6 +749,7 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   page.normal = Image(w, h, 3);
   page.position = Image(w, h, 3);
   page.variance.assign(n, 0.0f);
+  const float qmcFactor = qmcVarianceFactor(texels, light, pageIndex);
   page.texelWorldSize.assign(n, 0.0f);
   Image ao = settings.ambientOcclusion ? Image(w, h, 1) : Image();
   Image shadowmask = withShadowmask ? Image(w, h, 4) : Image();
@@ -710,7 +760,7 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     const TexelSample& texel = raster.texels[t];
     page.objectId[t] = texel.object;
     page.valid[t] = light[i].valid ? 1 : 0;
-    page.variance[t] = light[i].variance;
+    page.variance[t] = light[i].variance * qmcFactor;
     page.texelWorldSize[t] = 1.0f / layout.objects[size_t(texel.object)].texelsPerUnit;
     for (int c = 0; c < 3; ++c) {
       page.radiance.pixels[3 * t + c] = light[i].value[c];
@@ -724,6 +774,7 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     }
   }
   result.valid = page.valid;
+  result.variance = page.variance;
   result.samples.assign(n, 0);
   for (size_t i = 0; i < texels.size(); ++i)
     if (texels[i].page == pageIndex) result.samples[texels[i].index] = light[i].samples;

@@ -133,6 +133,10 @@ struct LightmapPageResult {
   // whole footprint with hidden points counted as 0 (what a renderer that bakes hidden
   // surface points black, such as Cycles, stores): tools/lightmap_compare uses it.
   Image coverage;
+  // W x H: the variance of each valid texel's luminance (E / pi) as the denoiser takes it
+  // (batch means, corrected for the sequence's faster-than-1/N convergence); 0 elsewhere.
+  // For the denoiser's calibration (chart 1) and tests.
+  std::vector<float> variance;
   // W x H: paths each covered texel took (0 for padding); with adaptive sampling they differ.
   std::vector<uint32_t> samples;
   // W x H x 3: world position of each covered texel's main sample point after push-out

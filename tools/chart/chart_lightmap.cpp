@@ -17,6 +17,9 @@ constexpr uint64_t kReferenceTag = 0x7265666572656eULL;  // "referen": the refer
 struct ErrorSums {
   double diff2 = 0.0, ref2 = 0.0;
   double sum = 0.0, refSum = 0.0;  // for the mean ratio
+  // Sum of the baker's per-texel luminance variance and of the squared luminance error:
+  // their ratio says whether the variance the denoiser is given matches the actual error.
+  double variance = 0.0, lumDiff2 = 0.0;
   size_t texels = 0;
   double relative() const { return ref2 > 0.0 ? std::sqrt(diff2 / ref2) : 0.0; }
   double ratio() const { return refSum > 0.0 ? sum / refSum : 0.0; }
@@ -38,6 +41,12 @@ ErrorSums compareBakes(const LightmapBakeResult& a, const LightmapBakeResult& re
         s.sum += double(x.light.pixels[3 * i + c]);
         s.refSum += v;
       }
+      if (!x.variance.empty()) s.variance += x.variance[i];
+      const double dl = double(luminance(vec3(x.light.pixels[3 * i], x.light.pixels[3 * i + 1],
+                                              x.light.pixels[3 * i + 2]))) -
+                        double(luminance(vec3(r.light.pixels[3 * i], r.light.pixels[3 * i + 1],
+                                              r.light.pixels[3 * i + 2])));
+      s.lumDiff2 += dl * dl;
       ++s.texels;
     }
   }
@@ -125,7 +134,7 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
   t.name = "lightmap_samples";
   t.title = "Lightmap: samples per texel vs error vs bake time (cornell_box)";
   t.columns = {"variant", "samples", "relative_rms_error", "rms_error", "mean_ratio",
-               "bake_seconds", "light_seconds", "rays", "texels", "repeats",
+               "variance_ratio", "bake_seconds", "light_seconds", "rays", "texels", "repeats",
                "reference_samples"};
   std::vector<double> xs, ys;
   for (size_t v = 0; v < denoised.size(); ++v)
@@ -139,7 +148,9 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
         ys.push_back(rel);
       }
       t.addRow({denoised[v] ? "denoised" : "raw", std::to_string(samples[k]), num(rel), num(rms),
-                num(c.error.ratio()), num(median(c.wall)), num(median(c.light)), std::to_string(c.rays),
+                num(c.error.ratio()),
+                num(c.error.lumDiff2 > 0.0 ? c.error.variance / c.error.lumDiff2 : 0.0),
+                num(median(c.wall)), num(median(c.light)), std::to_string(c.rays),
                 std::to_string(c.error.texels), std::to_string(repeats),
                 std::to_string(referenceSamples)});
     }
@@ -156,7 +167,10 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
                     num(refSeconds) + " s)");
   t.notes.push_back("relative_rms_error = sqrt(sum (x - ref)^2 / sum ref^2) over RGB of the "
                     "texels valid in both; rms_error in lightmap units (E / pi); mean_ratio = "
-                    "sum x / sum ref over the same texels");
+                    "sum x / sum ref over the same texels; variance_ratio = sum of the "
+                    "baker's per-texel luminance variance (what the denoiser is given) / sum of "
+                    "the squared luminance error, over the same texels (1 = calibrated; the "
+                    "reference's own noise adds about 1/16 of the 1024-sample variance)");
   t.notes.push_back("timing: bake_seconds = wall time of bakeLightmaps (all stages), "
                     "light_seconds = its light stage; median of " + std::to_string(repeats) +
                     " repeats, interleaved (each round bakes every variant and count once)");
