@@ -123,6 +123,22 @@ struct Guides {
       }
   }
 
+  // Calls f(x, y, i) for every valid texel, rows in parallel.
+  template <class F>
+  void forEachValid(const ParallelOptions& rows, F&& f) const {
+    const int w = page.width();
+    parallelFor(
+        size_t(page.height()),
+        [&](size_t begin, size_t end) {
+          for (size_t yy = begin; yy < end; ++yy)
+            for (int x = 0; x < w; ++x) {
+              const size_t i = yy * size_t(w) + size_t(x);
+              if (page.valid[i]) f(x, int(yy), i);
+            }
+        },
+        rows);
+  }
+
   // Product of the normal and position weights between p and q, q at texel offset
   // (ox, oy) from p.
   float geometric(int px, int py, int qx, int qy) const {
@@ -225,24 +241,14 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
       const float d = texelLuminance(filtered, x, y) - texelLuminance(raw, x, y);
       d2[size_t(y) * w + x] = d * d;
     }
-  parallelFor(
-      size_t(h),
-      [&](size_t begin, size_t end) {
-        for (size_t yy = begin; yy < end; ++yy) {
-          const int y = int(yy);
-          for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * w + x;
-            if (!page.valid[i]) continue;
-            double sumD2 = 0.0, gain = 0.0;
-            g.forEachCompatible(x, y, kSafeguardRadius, [&](size_t j) {
-              sumD2 += d2[j];
-              gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
-            });
-            blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
-          }
-        }
-      },
-      rows);
+  g.forEachValid(rows, [&](int x, int y, size_t i) {
+    double sumD2 = 0.0, gain = 0.0;
+    g.forEachCompatible(x, y, kSafeguardRadius, [&](size_t j) {
+      sumD2 += d2[j];
+      gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
+    });
+    blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
+  });
   return blend;
 }
 
@@ -402,29 +408,19 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     for (size_t i = 0; i < n; ++i) sigma[i] = std::sqrt(std::max(0.0f, page.variance[i]));
   } else {
     std::vector<uint8_t> estimated(n, 0);
-    parallelFor(
-        size_t(h),
-        [&](size_t begin, size_t end) {
-          for (size_t yy = begin; yy < end; ++yy) {
-            const int y = int(yy);
-            for (int x = 0; x < w; ++x) {
-              const size_t i = size_t(y) * w + x;
-              if (!page.valid[i]) continue;
-              std::array<float, 9> lum;
-              int count = 0;
-              g.forEachCompatible(x, y, 1, [&](size_t j) {
-                lum[size_t(count++)] = texelLuminance(page.radiance, int(j % size_t(w)),
-                                                      int(j / size_t(w)));
-              });
-              if (count < 3) continue;
-              const float med = median(lum.data(), count);
-              for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
-              sigma[i] = kMadToSigma * median(lum.data(), count);
-              estimated[i] = 1;
-            }
-          }
-        },
-        rows);
+    g.forEachValid(rows, [&](int x, int y, size_t i) {
+      std::array<float, 9> lum;
+      int count = 0;
+      g.forEachCompatible(x, y, 1, [&](size_t j) {
+        lum[size_t(count++)] = texelLuminance(page.radiance, int(j % size_t(w)),
+                                              int(j / size_t(w)));
+      });
+      if (count < 3) return;
+      const float med = median(lum.data(), count);
+      for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
+      sigma[i] = kMadToSigma * median(lum.data(), count);
+      estimated[i] = 1;
+    });
     double total = 0.0;
     size_t count = 0;
     for (size_t i = 0; i < n; ++i)
