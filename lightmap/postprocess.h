@@ -122,7 +122,8 @@ struct DenoiseSettings {
 // (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
 // moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
 // result (its divergence again by perturbation) against the raw texels' risk (sum var): an
-// object the estimate does not find better keeps its raw texels. Last, each object's sum
+// object the estimate does not find better by more than the estimate's spread keeps its raw
+// texels. Last, each object's sum
 // per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
 // filter runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
