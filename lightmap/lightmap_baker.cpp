@@ -49,17 +49,26 @@ namespace {
 constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
 constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
 constexpr uint64_t kEnclosureTag = 0x656e;  // "en": enclosure rays' stream
+constexpr uint64_t kFloorTag = 0x666c;  // "fl": the error floor's pre-pass
+// Error floor pre-pass: paths at every kFloorStride-th texel.
+constexpr size_t kFloorStride = 16;
+constexpr uint32_t kFloorSamples = 16;
 // Enclosure test: cosine-weighted rays per sample point (it stops at the first that
 // escapes, so an open point costs one or two rays).
 constexpr uint32_t kEnclosureRays = 32;
 // Light batches per texel: the spread of batch means estimates each texel's variance for
 // the denoiser (the batches together are exactly the full estimate).
-constexpr uint32_t kVarianceBatches = 4;
+constexpr uint32_t kVarianceBatches = 16;
+// Batches per group for the coarse variance estimate (TexelLight::varianceCoarse).
+constexpr uint32_t kGroupBatches = 4;
+constexpr uint32_t kQmcMinPaths = 4 * kVarianceBatches;
 // Push-out: rays in 8 directions of the surface's tangent plane, reaching this many texel
 // edges, repeated this many times (a point in a corner of two solids needs two moves).
 constexpr int kPushDirections = 8;
 constexpr float kPushReachTexels = 1.0f;
 constexpr int kPushPasses = 2;
+// Footprint grid of texels next to geometry: n x n points (stage 4b).
+constexpr int kFootprintGrid = 4;
 
 Status validate(const LightmapBakeSettings& s) {
   auto bad = [](const std::string& what) { return Status(Error{"lightmap bake: " + what}); };
@@ -120,7 +129,7 @@ std::vector<TexelRef> coveredTexels(const std::vector<RasterPage>& pages) {
 // sample (supersampling 1, or a sliver no grid point fell on).
 std::pair<TexelPoint*, uint32_t> texelPoints(RasterPage& page, TexelSample& texel,
                                              int supersampling) {
-  if (supersampling > 1 && texel.subsampleCount > 0)
+  if ((supersampling > 1 || texel.footprintGrid) && texel.subsampleCount > 0)
     return {&page.subsamples[texel.firstSubsample], texel.subsampleCount};
   return {&texel.sample, 1u};
 }
@@ -147,9 +156,11 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
       const vec3 dir = std::cos(phi) * frame.t + std::sin(phi) * frame.b;
       ++rays;
       const auto hit = tracer.intersect(Ray{origin, dir, 0.0f, nearest});
-      if (!hit || !hit->backFace) continue;
+      if (!hit) continue;
       const Material& m = scene.materialOf(hit->object, hit->triangle);
-      if (m.doubleSided || m.alphaMode == AlphaMode::Blend) continue;
+      if (m.alphaMode == AlphaMode::Blend) continue;
+      if (pass == 0) point.nearSurface = true;
+      if (!hit->backFace || m.doubleSided) continue;
       nearest = hit->t;
       direction = dir;
     }
@@ -160,6 +171,29 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
     point.pushedOut = true;
   }
   return rays;
+}
+
+// Whether point p lies inside a closed solid: most of kPushDirections rays along its
+// surface's tangent plane (any length) hit the back of a single-sided surface. A floor under
+// a block is; a ceiling 1 mm above a single-sided lamp is not (its tangent rays pass the
+// lamp and reach the room's walls from the front). Adds the rays traced to `rays`.
+bool insideSolid(const Scene& scene, const Tracer& tracer, uint32_t object, const TexelPoint& p,
+                 uint64_t& rays) {
+  const vec3 ng = scene.objects[object].faceNormal(p.triangle);
+  if (!(glm::dot(ng, ng) > 0.0f)) return false;
+  const Frame frame = Frame::fromNormal(ng);
+  const vec3 origin = offsetRayOrigin(p.position, ng);
+  int backs = 0;
+  for (int d = 0; d < kPushDirections; ++d) {
+    const float phi = 2.0f * kPi * float(d) / float(kPushDirections);
+    const vec3 dir = std::cos(phi) * frame.t + std::sin(phi) * frame.b;
+    ++rays;
+    const auto hit = tracer.intersect(Ray{origin, dir, 0.0f, kInfinity});
+    if (!hit || !hit->backFace) continue;
+    const Material& m = scene.materialOf(hit->object, hit->triangle);
+    if (!m.doubleSided && m.alphaMode != AlphaMode::Blend) ++backs;
+  }
+  return 2 * backs > kPushDirections;
 }
 
 // Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
@@ -190,14 +224,102 @@ bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& t
   return done;
 }
 
+// Stage 4b: texels next to geometry (a sample point push-out moved, or a tangent-plane ray
+// that hit a surface within a texel) get a kFootprintGrid^2 grid of points over their
+// footprint (at least the supersampling grid), pushed out like the others; the points found
+// inside a solid are the hidden part of the footprint, left out of the texel's value
+// (lightTexel). Texels elsewhere keep their points: nothing within a texel of them can hide
+// part of their footprint.
+bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
+                    const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
+                    int supersampling, bool showProgress, ParallelOptions options,
+                    std::atomic<uint64_t>& rays, std::string& error) {
+  std::vector<std::vector<uint8_t>> masks(pages.size());
+  for (size_t p = 0; p < pages.size(); ++p) masks[p].assign(pages[p].texels.size(), 0);
+  size_t flagged = 0;
+  for (const TexelRef& t : texels) {
+    const RasterPage& page = pages[t.page];
+    const TexelSample& texel = page.texels[t.index];
+    bool near = texel.sample.nearSurface || texel.sample.pushedOut;
+    for (uint32_t s = 0; s < texel.subsampleCount && !near; ++s) {
+      const TexelPoint& q = page.subsamples[texel.firstSubsample + s];
+      near = q.nearSurface || q.pushedOut;
+    }
+    masks[t.page][t.index] = near ? 1 : 0;
+    flagged += near ? 1 : 0;
+  }
+  if (flagged == 0) return true;
+  RasterSettings raster;
+  raster.supersampling = std::max(supersampling, kFootprintGrid);
+  raster.subsampleMask = &masks;
+  raster.parallel = options;
+  raster.parallel.progress = nullptr;
+  auto grids = rasterizeAtlas(scene, layout, raster);
+  if (!grids) {
+    error = grids.error();
+    return false;
+  }
+  // The grid points of the flagged texels, appended to their page's subsamples.
+  struct NewPoint {
+    uint32_t page, index, object;
+  };
+  std::vector<NewPoint> added;
+  for (const TexelRef& t : texels) {
+    if (!masks[t.page][t.index]) continue;
+    const RasterPage& grid = (*grids)[t.page];
+    const TexelSample& g = grid.texels[t.index];
+    if (g.subsampleCount == 0) continue;  // a sliver no grid point falls on
+    RasterPage& page = pages[t.page];
+    TexelSample& texel = page.texels[t.index];
+    texel.firstSubsample = uint32_t(page.subsamples.size());
+    texel.subsampleCount = g.subsampleCount;
+    texel.footprintGrid = true;
+    for (uint32_t s = 0; s < g.subsampleCount; ++s) {
+      added.push_back({t.page, uint32_t(page.subsamples.size()), uint32_t(texel.object)});
+      page.subsamples.push_back(grid.subsamples[g.firstSubsample + s]);
+    }
+  }
+  Progress progress("footprint", added.size(), "points", showProgress && !added.empty());
+  options.progress = &progress;
+  options.grain = 256;
+  const bool done = parallelFor(
+      added.size(),
+      [&](size_t begin, size_t end) {
+        uint64_t local = 0;
+        for (size_t i = begin; i < end; ++i) {
+          RasterPage& page = pages[added[i].page];
+          TexelPoint& point = page.subsamples[added[i].index];
+          const uint32_t object = added[i].object;
+          const float reach = kPushReachTexels / layout.objects[object].texelsPerUnit;
+          local += pushOutPoint(scene, tracer, object, reach, point);
+        }
+        rays += local;
+      },
+      options);
+  if (done) progress.finish();
+  return done;
+}
+
 // Stage 5 output for one covered texel.
 struct TexelLight {
   vec3 value{0.0f};       // E / pi over the texel's valid points
   float variance = 0.0f;  // of the luminance of `value` (from batch means)
+  // The same from the means of groups of kGroupBatches consecutive batches (4x the paths
+  // each): with quasi-Monte Carlo its ratio to `variance` measures how much faster than
+  // 1 / N the error falls (qmcVarianceFactor).
+  float varianceCoarse = 0.0f;
   float ao = 1.0f;
   vec4 shadowmask{1.0f};  // per channel: visible fraction of that channel's light
   vec4 direction{0.5f, 0.5f, 0.5f, 0.5f};  // encodeDominantDirection
   bool valid = false;
+  uint32_t samples = 0;    // paths the texel took (over all its points)
+  uint64_t rays = 0;       // rays traced for it in stage 5
+  // Footprint weight: value x coverage = the mean of E / pi over the texel's whole footprint,
+  // points inside geometry included at their own (dark) estimate; the visible share of the
+  // footprint on a footprint grid, 1 elsewhere (LightmapPageResult::coverage).
+  float coverage = 1.0f;
+  // Its points lie inside a solid (push-out moved them all): the footprint is hidden.
+  bool insideSolid = false;
   // One of its points lies on the visible surface where it was rasterized (not inside a
   // solid, not moved by push-out): bilinear lookups at visible points read this texel.
   bool onVisibleSurface = false;
@@ -222,7 +344,10 @@ bool lightReaches(const Light& light, vec3 p) {
 }
 
 struct LightSettings {
-  uint32_t samples = 1;
+  uint32_t samples = 1;     // paths per texel; with an error target, the cap
+  uint32_t firstRound = 1;  // with an error target: the first round's paths (then doubling)
+  float errorTarget = 0.0f;  // relative standard error a texel stops at; 0 = fixed count
+  float errorFloor = 0.0f;   // absolute floor added to the texel's luminance (E / pi)
   int supersampling = 1;
   uint64_t seed = 0;
   float backfaceTolerance = 0.5f;
@@ -280,52 +405,66 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
   return true;
 }
 
-// Stage 5, one texel: samples split evenly over its points (point i takes indices
-// [i S / k, (i + 1) S / k) of the texel's stream), each point's share in kVarianceBatches
-// batches. Points inside geometry (back-face share > tolerance) are left out of a valid
-// texel's value, which is then the mean over the texel's unoccluded points (what a visible
-// surface point near the texel sees). A texel with no such point is invalid; its value is
-// then the plain mean over all its points: the physical irradiance of a surface enclosed by
-// geometry, ~0 (paths end at back faces, shadow rays are blocked), which is what it keeps
-// unless it is next to a valid texel (lightmap_baker.h, postPage).
+// Stage 5, one texel, in rounds. Round r adds samples [N_r, N_{r+1}) of the texel's stream
+// (N_0 = 0, N_1 = the first round's count, then doubling up to the cap), split evenly over
+// the texel's points (point i takes [N_r + i D / k, N_r + (i + 1) D / k), D = N_{r+1} -
+// N_r), so the union of the texel's paths is always one Sobol prefix [0, N) whatever the
+// number of rounds. Each round is kVarianceBatches batches, batch b holding slice b of every
+// point's share (so a batch mean is over the whole texel, not one point), and the spread of
+// all batch means gives the variance of the texel's mean. With an error target, the texel
+// stops when that standard error is at most target x (luminance + floor) (Beast's final
+// gather contrast threshold, relative to the texel plus an absolute floor so that dark
+// texels do not take the cap); without one, one round of s.samples.
+// Every decision uses this texel's own samples: the result does not depend on threads.
+//
+// Points inside geometry (back-face share > tolerance after the first round, or enclosed)
+// are left out of a valid texel's value, which is then the mean over the texel's unoccluded
+// points (what a visible surface point near the texel sees); later rounds skip them. On a
+// footprint grid (texels next to geometry, TexelSample::footprintGrid), the points push-out
+// found inside a solid are hidden too and never traced: the texel holds the mean over the
+// visible part of its footprint, and `coverage` is that part's share. A texel with no
+// visible point is invalid; its value is then the plain mean over all its points (the
+// physical irradiance of a surface enclosed by geometry, ~0: paths end at back faces,
+// shadow rays are blocked), which it keeps unless it is next to a valid texel (postPage).
 TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
-                      const TexelPoint* points, uint32_t pointCount, float enclosedReach,
-                      uint64_t& extraRays) {
+                      const TexelPoint* points, uint32_t pointCount, bool footprintGrid,
+                      float enclosedReach, uint64_t& extraRays) {
   TexelLight out;
-  PointSums used, all;
-  std::vector<std::pair<double, uint32_t>> batches;  // (luminance of batch mean, size)
-  for (uint32_t i = 0; i < pointCount; ++i) {
-    const uint32_t first = uint32_t(uint64_t(i) * s.samples / pointCount);
-    const uint32_t count = uint32_t(uint64_t(i + 1) * s.samples / pointCount) - first;
-    if (count == 0) continue;
-    const TexelPoint& p = points[i];
-    uint32_t backFaces = 0;
-    const uint32_t nb = std::min(kVarianceBatches, count);
-    PointSums point;
-    point.samples = count;
-    point.normal = p.normal;
-    const size_t batchStart = batches.size();
-    for (uint32_t b = 0; b < nb; ++b) {
-      const uint32_t bFirst = first + b * count / nb;
-      const uint32_t bCount = first + (b + 1) * count / nb - bFirst;
-      vec3 direction(0.0f);
-      const vec3 e = integrator
-                         .irradiance(p.position, p.normal, key, bFirst, bCount, &backFaces,
-                                     s.directional ? &direction : nullptr)
-                         .total();
-      point.light += glm::dvec3(e) * double(bCount);
-      point.direction += glm::dvec3(direction) * double(bCount);
-      batches.push_back({double(luminance(e)) * kInvPi, bCount});
-    }
-    const bool inside = float(backFaces) > s.backfaceTolerance * float(count) ||
-                        enclosed(integrator, p, enclosedReach, hashValues(key, i), extraRays);
-    if (inside) batches.resize(batchStart);  // does not count towards a valid texel's value
+  // Points that take part: on a footprint grid the visible ones (all of them when push-out
+  // found every point inside a solid: the texel then bakes the light just outside it, as a
+  // texel whose only point was pushed out does).
+  std::vector<uint32_t> active;
+  for (uint32_t i = 0; i < pointCount; ++i)
+    if (!footprintGrid || !points[i].pushedOut) active.push_back(i);
+  const uint32_t visibleGridPoints = uint32_t(active.size());
+  if (active.empty())
+    for (uint32_t i = 0; i < pointCount; ++i) active.push_back(i);
+  const uint32_t k = uint32_t(active.size());
+  std::vector<PointSums> sums(k);
+  std::vector<uint32_t> backFaces(k, 0);
+  std::vector<uint8_t> inside(k, 0);
+  // Batch luminance sums and sample counts (over the points in use when the batch ran).
+  std::vector<std::pair<double, uint32_t>> batches;
+  const uint64_t smKey = hashValues(key, kShadowmaskTag);
+  const uint64_t aoKey = hashValues(key, kAoTag);
+  const Scene& scene = integrator.scene();
+
+  // Samples [first, first + count) at point j, added to sums[j]; returns the luminance sum.
+  auto run = [&](uint32_t j, uint32_t first, uint32_t count) -> double {
+    const TexelPoint& p = points[active[j]];
+    PointSums& point = sums[j];
+    vec3 direction(0.0f);
+    const vec3 e = integrator
+                       .irradiance(p.position, p.normal, key, first, count, &backFaces[j],
+                                   s.directional ? &direction : nullptr)
+                       .total();
+    point.light += glm::dvec3(e) * double(count);
+    point.direction += glm::dvec3(direction) * double(count);
+    point.samples += count;
     if (s.shadowmask) {
       // Each channel: the visibility of the one light of that channel reaching p, averaged
       // over the point's samples when the light's shadows are soft (one evaluation when
       // hard: every sample would trace the same ray).
-      const uint64_t smKey = hashValues(key, kShadowmaskTag);
-      const Scene& scene = integrator.scene();
       for (int c = 0; c < kShadowmaskChannels; ++c) {
         double v = double(count);  // unreached: unshadowed
         for (uint32_t light : (*s.shadowmask)[size_t(c)]) {
@@ -338,53 +477,207 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
                 luminance(integrator.lightVisibility(p.position, p.normal, light, smKey, 0));
           } else {
             v = 0.0;
-            for (uint32_t j = first; j < first + count; ++j)
-              v += luminance(integrator.lightVisibility(p.position, p.normal, light, smKey, j));
+            for (uint32_t i = first; i < first + count; ++i)
+              v += luminance(integrator.lightVisibility(p.position, p.normal, light, smKey, i));
           }
           break;
         }
-        point.visibility[c] = v;
+        point.visibility[c] += v;
       }
     }
     if (s.ambientOcclusion) {
       // Cosine-weighted rays of length aoMaxDistance; the fraction that hits anything.
       const Frame frame = Frame::fromNormal(p.normal);
       const vec3 origin = offsetRayOrigin(p.position, p.normal);
-      const uint64_t aoKey = hashValues(key, kAoTag);
-      for (uint32_t j = first; j < first + count; ++j) {
-        SampleStream stream(aoKey, j);
+      for (uint32_t i = first; i < first + count; ++i) {
+        SampleStream stream(aoKey, i);
         const vec3 dir = frame.toWorld(squareToCosineHemisphere(stream.get2D()));
         if (integrator.tracer().occluded(Ray{origin, dir, 0.0f, s.aoMaxDistance}))
           point.aoOccluded += 1.0;
       }
       extraRays += count;
     }
-    all.add(point);
-    if (!inside) used.add(point);
-    if (!inside && !p.pushedOut) out.onVisibleSurface = true;
+    return double(luminance(e)) * double(count);
+  };
+
+  const uint32_t cap = std::max(s.samples, 1u);
+  const uint32_t firstRound = s.errorTarget > 0.0f ? std::max(s.firstRound, 1u) : cap;
+  uint32_t done = 0;
+  double meanLum = 0.0, varMean = 0.0;
+  for (int round = 0; done < cap; ++round) {
+    const uint32_t target = round == 0 ? std::min(cap, firstRound) : std::min(cap, 2 * done);
+    const uint32_t d = target - done;
+    // The points still in use this round (a point found inside after the first round is
+    // dropped from a texel that has other points).
+    std::vector<uint32_t> use;
+    for (uint32_t j = 0; j < k; ++j)
+      if (!inside[j]) use.push_back(j);
+    if (use.empty())
+      for (uint32_t j = 0; j < k; ++j) use.push_back(j);
+    const uint32_t m = uint32_t(use.size());
+    for (uint32_t b = 0; b < kVarianceBatches; ++b) {
+      double lum = 0.0;
+      uint32_t n = 0;
+      for (uint32_t u = 0; u < m; ++u) {
+        const uint32_t first = done + uint32_t(uint64_t(u) * d / m);
+        const uint32_t count = done + uint32_t(uint64_t(u + 1) * d / m) - first;
+        const uint32_t bFirst = first + b * count / kVarianceBatches;
+        const uint32_t bCount = first + (b + 1) * count / kVarianceBatches - bFirst;
+        if (bCount == 0) continue;
+        lum += run(use[u], bFirst, bCount);
+        n += bCount;
+      }
+      if (n > 0) batches.push_back({lum / double(n) * kInvPi, n});
+    }
+    done = target;
+    if (round == 0) {
+      // Validity from the first round's rays.
+      for (uint32_t j = 0; j < k; ++j)
+        inside[j] = float(backFaces[j]) > s.backfaceTolerance * float(sums[j].samples) ||
+                    enclosed(integrator, points[active[j]], enclosedReach,
+                             hashValues(key, active[j]), extraRays);
+    }
+    // Mean and variance of the mean over the points in use (batches of unequal sizes:
+    // sigma^2 = sum n_b (m_b - m)^2 / (B - 1), var(mean) = sigma^2 / N).
+    PointSums used;
+    for (uint32_t j = 0; j < k; ++j)
+      if (!inside[j]) used.add(sums[j]);
+    if (used.samples == 0) break;  // invalid: no more rounds
+    meanLum = luminance(vec3(used.light / double(used.samples))) * kInvPi;
+    if (!(s.errorTarget > 0.0f)) continue;
+    if (batches.size() < 2) continue;
+    double ss = 0.0, total = 0.0;
+    for (const auto& [l, n] : batches) {
+      ss += double(n) * (l - meanLum) * (l - meanLum);
+      total += n;
+    }
+    varMean = ss / double(batches.size() - 1) / total;
+    if (std::sqrt(varMean) <= double(s.errorTarget) * (meanLum + double(s.errorFloor))) break;
   }
+
+  PointSums used, all;
+  for (uint32_t j = 0; j < k; ++j) {
+    sums[j].normal = points[active[j]].normal;
+    all.add(sums[j]);
+    if (!inside[j]) {
+      used.add(sums[j]);
+      if (!points[active[j]].pushedOut) out.onVisibleSurface = true;
+    }
+  }
+  out.samples = done;
   out.valid = used.samples > 0;
-  const PointSums& sums = out.valid ? used : all;
-  if (sums.samples == 0) return out;
-  const double n = double(sums.samples);
-  out.value = vec3(sums.light / n) * kInvPi;
-  if (s.shadowmask) out.shadowmask = glm::clamp(vec4(sums.visibility / n), 0.0f, 1.0f);
-  if (s.directional) {
-    const float len = glm::length(sums.normal);
-    const vec3 normal = len > 0.0f ? sums.normal / len : vec3(0.0f);
-    out.direction = encodeDominantDirection(vec3(sums.direction / n),
-                                            luminance(vec3(sums.light / n)), normal);
+  const PointSums& total = out.valid ? used : all;
+  if (total.samples == 0) return out;
+  const double n = double(total.samples);
+  out.value = vec3(total.light / n) * kInvPi;
+  // The footprint weight (TexelLight::coverage): the mean over every point of the footprint,
+  // each at its own estimate (0 for a point inside a solid), over the value stored. On a
+  // footprint grid that is the visible share when the points inside see nothing.
+  out.coverage = 1.0f;
+  out.insideSolid = footprintGrid ? visibleGridPoints == 0 : pointCount == 1 && points[0].pushedOut;
+  if (footprintGrid && visibleGridPoints == 0) out.coverage = 0.0f;  // all inside a solid
+  if (footprintGrid && visibleGridPoints > 0) {
+    double footprint = 0.0;
+    for (uint32_t j = 0; j < k; ++j)
+      if (sums[j].samples > 0) footprint += luminance(vec3(sums[j].light / double(sums[j].samples)));
+    footprint /= double(pointCount);
+    const double stored = luminance(vec3(total.light / n));
+    uint32_t visible = 0;
+    for (uint32_t j = 0; j < k; ++j) visible += inside[j] ? 0 : 1;
+    out.coverage = stored > 0.0 ? float(std::min(1.0, footprint / stored))
+                                : float(visible) / float(pointCount);
   }
-  if (s.ambientOcclusion) out.ao = 1.0f - float(sums.aoOccluded / n);
-  // Variance of the mean from the spread of the batch means (batches of near-equal size).
+  if (s.shadowmask) out.shadowmask = glm::clamp(vec4(total.visibility / n), 0.0f, 1.0f);
+  if (s.directional) {
+    const float len = glm::length(total.normal);
+    const vec3 normal = len > 0.0f ? total.normal / len : vec3(0.0f);
+    out.direction = encodeDominantDirection(vec3(total.direction / n),
+                                            luminance(vec3(total.light / n)), normal);
+  }
+  if (s.ambientOcclusion) out.ao = 1.0f - float(total.aoOccluded / n);
+  // Variance of the mean from the spread of the batch means.
   if (out.valid && batches.size() >= 2) {
     const double mean = double(luminance(out.value));
-    double ss = 0.0;
-    for (const auto& [l, count] : batches) ss += (l - mean) * (l - mean);
-    const double m = double(batches.size());
-    out.variance = float(ss / (m * (m - 1.0)));
+    double ss = 0.0, count = 0.0;
+    for (const auto& [l, nb] : batches) {
+      ss += double(nb) * (l - mean) * (l - mean);
+      count += nb;
+    }
+    out.variance = float(ss / double(batches.size() - 1) / count);
+    // Groups of kGroupBatches consecutive batches: each round's batches are slices in
+    // order, so a group is again one contiguous, aligned slice of every point's share.
+    std::vector<std::pair<double, double>> groups;  // (luminance sum, paths)
+    for (size_t b = 0; b < batches.size(); ++b) {
+      if (b % kGroupBatches == 0) groups.push_back({0.0, 0.0});
+      groups.back().first += batches[b].first * batches[b].second;
+      groups.back().second += batches[b].second;
+    }
+    if (groups.size() >= 2) {
+      double gss = 0.0;
+      for (const auto& [sum, nb] : groups) {
+        const double m = sum / nb;
+        gss += nb * (m - mean) * (m - mean);
+      }
+      out.varianceCoarse = float(gss / double(groups.size() - 1) / count);
+    }
   }
   return out;
+}
+
+// Batch means estimate a texel's variance as if its error fell as 1 / N (plain Monte
+// Carlo). The paths are a scrambled Sobol sequence, whose error can fall faster (up to
+// N^-1.5 for smooth 2D integrands such as direct light from an area light): batches of
+// N / 16 paths then spread more than the full N's error implies, and the
+// estimate is too large. With var(n) ~ n^-g, the estimates from batches (N / B paths) and
+// from groups of kGroupBatches batches agree when g = 1, and otherwise differ by
+// q = coarse / fine = kGroupBatches^(1 - g); extrapolating from the groups to the whole
+// (B / kGroupBatches = kGroupBatches times more paths) multiplies by q once more: the
+// corrected variance is fine x q^2. q is taken over the page (a per-texel ratio of two
+// estimates from 16 and 4 means is too noisy), clamped to [1/4, 1] (1 <= g <= 2), and over
+// the texels with at least kQmcMinPaths paths (4 per batch: with fewer, a batch is a
+// handful of paths, not a slice of a net, and the ratio says nothing about the rate).
+float qmcVarianceFactor(const std::vector<TexelRef>& texels, const std::vector<TexelLight>& light,
+                        uint32_t pageIndex) {
+  double fine = 0.0, coarse = 0.0;
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (texels[i].page == pageIndex && light[i].valid &&
+        light[i].samples >= kQmcMinPaths) {
+      fine += light[i].variance;
+      coarse += light[i].varianceCoarse;
+    }
+  if (!(fine > 0.0)) return 1.0f;
+  const double q = std::clamp(coarse / fine, 0.25, 1.0);
+  return float(q * q);
+}
+
+// The scene's mean texel luminance (E / pi), for the adaptive error floor: kFloorSamples
+// paths at the main sample of every kFloorStride-th texel, summed in texel order (so the
+// same at any thread count). Its paths use their own stream and are not reused.
+double meanTexelLuminance(const std::vector<RasterPage>& pages,
+                          const std::vector<TexelRef>& texels, const Integrator& integrator,
+                          uint64_t seed, ParallelOptions options, std::atomic<uint64_t>& rays) {
+  const size_t count = (texels.size() + kFloorStride - 1) / kFloorStride;
+  std::vector<double> lum(count, 0.0);
+  options.progress = nullptr;
+  options.grain = 16;
+  parallelFor(
+      count,
+      [&](size_t begin, size_t end) {
+        const uint64_t before = Integrator::threadRayCount();
+        for (size_t i = begin; i < end; ++i) {
+          const TexelRef& t = texels[i * kFloorStride];
+          const TexelPoint& p = pages[t.page].texels[t.index].sample;
+          const uint64_t key = hashValues(hashValues(seed, t.page, t.index), kFloorTag);
+          lum[i] = double(luminance(
+                       integrator.irradiance(p.position, p.normal, key, 0, kFloorSamples).total())) *
+                   kInvPi;
+        }
+        rays += Integrator::threadRayCount() - before;
+      },
+      options);
+  double sum = 0.0;
+  for (double l : lum) sum += l;
+  return count ? sum / double(count) : 0.0;
 }
 
 // Stage 5: light at every covered texel.
@@ -408,7 +701,13 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
           const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
-          out[i] = lightTexel(integrator, s, key, points, count, reach, extraRays);
+          const uint64_t texelStart = Integrator::threadRayCount() + extraRays;
+          out[i] = lightTexel(integrator, s, key, points, count, texel.footprintGrid, reach,
+                              extraRays);
+          if (!out[i].valid && !out[i].insideSolid)
+            out[i].insideSolid = insideSolid(integrator.scene(), integrator.tracer(),
+                                             uint32_t(texel.object), texel.sample, extraRays);
+          out[i].rays = Integrator::threadRayCount() + extraRays - texelStart;
         }
         rays += Integrator::threadRayCount() - before + extraRays;
       },
@@ -450,6 +749,7 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   page.normal = Image(w, h, 3);
   page.position = Image(w, h, 3);
   page.variance.assign(n, 0.0f);
+  const float qmcFactor = qmcVarianceFactor(texels, light, pageIndex);
   page.texelWorldSize.assign(n, 0.0f);
   Image ao = settings.ambientOcclusion ? Image(w, h, 1) : Image();
   Image shadowmask = withShadowmask ? Image(w, h, 4) : Image();
@@ -460,7 +760,7 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     const TexelSample& texel = raster.texels[t];
     page.objectId[t] = texel.object;
     page.valid[t] = light[i].valid ? 1 : 0;
-    page.variance[t] = light[i].variance;
+    page.variance[t] = light[i].variance * qmcFactor;
     page.texelWorldSize[t] = 1.0f / layout.objects[size_t(texel.object)].texelsPerUnit;
     for (int c = 0; c < 3; ++c) {
       page.radiance.pixels[3 * t + c] = light[i].value[c];
@@ -474,6 +774,18 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     }
   }
   result.valid = page.valid;
+  result.variance = page.variance;
+  result.samples.assign(n, 0);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (texels[i].page == pageIndex) result.samples[texels[i].index] = light[i].samples;
+  if (settings.coverageMap) {
+    result.coverage = Image(w, h, 1);
+    for (size_t i = 0; i < texels.size(); ++i)
+      if (texels[i].page == pageIndex) result.coverage.pixels[texels[i].index] = light[i].coverage;
+  }
+  // Invalid texels before the fill: their own estimate (the footprint mean), for the
+  // coverage of those the fill changes.
+  const Image physical = settings.coverageMap ? page.radiance : Image();
   result.position = page.position;
 
   // Invalid texels (inside geometry): those next to a texel of their object with a point on
@@ -506,6 +818,23 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     filled = fillInvalid(page.radiance, page.valid, page.objectId, fill);
     progress.fill.advance(n);
   }
+  // A filled texel holds its neighbours' light for bilinear lookups at visible points; its
+  // footprint weight brings it back to its own estimate (~0 inside geometry).
+  // Only inside a solid: an invalid texel outside one (a ceiling 1 mm above a single-sided
+  // lamp, whose back faces end kiln's paths) has no estimate of its own worth more than the
+  // fill (an independent renderer that shades back faces lets light into such a slit).
+  std::vector<uint8_t> insideSolid(settings.coverageMap ? n : 0, 0);
+  for (size_t i = 0; i < texels.size() && settings.coverageMap; ++i)
+    if (texels[i].page == pageIndex) insideSolid[texels[i].index] = light[i].insideSolid;
+  if (settings.coverageMap)
+    for (size_t t = 0; t < n; ++t) {
+      if (page.objectId[t] < 0 || page.valid[t] || !insideSolid[t]) continue;
+      const float* f = page.radiance.at(int(t % size_t(w)), int(t / size_t(w)));
+      const float* q = physical.at(int(t % size_t(w)), int(t / size_t(w)));
+      const float filledLum = luminance(vec3(f[0], f[1], f[2]));
+      const float ownLum = luminance(vec3(q[0], q[1], q[2]));
+      result.coverage.pixels[t] = filledLum > 0.0f ? std::min(1.0f, ownLum / filledLum) : 1.0f;
+    }
   // Rings enough to cover the gutters between objects (2 x padding) and between charts.
   const int rings = std::max(2, 2 * settings.padding);
   std::vector<uint8_t> mask;
@@ -690,6 +1019,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
                     rays) ||
       cancelled(cancel))
     return Error{"cancelled"};
+  std::string footprintError;
+  if (settings.footprintGrid &&
+      !footprintStage(pages, texels, result.scene, result.layout, **tracer,
+                      settings.supersampling, showProgress, parallel, rays, footprintError) ||
+      cancelled(cancel))
+    return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};
 
   // Stage 5: light.
   result.lightModes = planLightModes(result.scene, settings.lightingMode);
@@ -706,6 +1041,14 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   const Integrator integrator(result.scene, **tracer, is);
   LightSettings ls;
   ls.samples = uint32_t(settings.samplesPerTexel);
+  if (settings.errorTarget > 0.0f) {
+    ls.errorTarget = settings.errorTarget;
+    ls.firstRound = uint32_t(std::min(settings.minSamples, settings.samplesPerTexel));
+    result.stats.meanLuminance =
+        meanTexelLuminance(pages, texels, integrator, settings.seed, parallel, rays);
+    ls.errorFloor = float(settings.errorFloor * result.stats.meanLuminance);
+    if (cancelled(cancel)) return Error{"cancelled"};
+  }
   ls.supersampling = settings.supersampling;
   ls.seed = settings.seed;
   ls.backfaceTolerance = settings.backfaceTolerance;
@@ -744,6 +1087,21 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
 
   result.stats.texels = texels.size();
   for (const TexelLight& t : light) result.stats.invalidTexels += t.valid ? 0 : 1;
+  if (!light.empty()) {
+    LightmapBakeStats& st = result.stats;
+    st.minSamples = light[0].samples;
+    double sumSamples = 0.0;
+    for (const TexelLight& t : light) {
+      st.minSamples = std::min(st.minSamples, t.samples);
+      st.maxSamples = std::max(st.maxSamples, t.samples);
+      sumSamples += t.samples;
+      size_t bucket = 0;  // [2^b, 2^(b+1)) rays; 0 also holds texels with 0 or 1 ray
+      while (bucket + 1 < st.raysPerTexelHistogram.size() && (t.rays >> (bucket + 1)) > 0)
+        ++bucket;
+      ++st.raysPerTexelHistogram[bucket];
+    }
+    st.meanSamples = sumSamples / double(light.size());
+  }
   result.stats.rays = rays.load();
   if (result.stats.clampedTexels > 0)
     result.warnings.push_back(std::to_string(result.stats.clampedTexels) +

@@ -20,6 +20,7 @@
 // Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <optional>
 #include <string>
@@ -46,7 +47,17 @@ struct LightmapBakeSettings {
   float minObjectTexels = kMinObjectTexels;
   std::optional<AtlasLayout> lockedAtlas;  // --lock-atlas
   // Sampling.
-  int samplesPerTexel = 256;  // paths per texel (split over the supersamples)
+  // Paths per texel (split over the supersamples); with errorTarget > 0, the cap.
+  int samplesPerTexel = 256;
+  // Adaptive sampling (lightmap_baker.cpp, lightTexel): > 0 = each texel takes paths in
+  // rounds (minSamples, then doubling up to samplesPerTexel) until the standard error of its
+  // mean, from the spread of its batch means, is at most errorTarget x (its luminance +
+  // errorFloor x the scene's mean texel luminance). Smooth, bright texels stop early, texels
+  // whose paths disagree (penumbrae, caustic-like indirect light, dark corners up to the
+  // floor) take more. 0 = every texel takes samplesPerTexel paths.
+  float errorTarget = 0.0f;
+  int minSamples = 32;
+  float errorFloor = 0.1f;
   int supersampling = 1;      // n x n sample points per texel
   uint64_t seed = 0;
   // Light transport (see IntegratorSettings).
@@ -82,6 +93,13 @@ struct LightmapBakeSettings {
   // Post.
   bool denoise = true;
   bool stitchSeams = true;
+  // Hidden-edge texels (lightmap_baker.cpp, footprintStage): texels next to geometry get a
+  // 4 x 4 grid of points over their footprint, and the points inside a solid are left out of
+  // their value. Off by default: a grid texel straddling a thin wall still mixes the light
+  // of both sides (two_rooms), and one whose remaining points are all inside turns invalid.
+  bool footprintGrid = false;
+  // Keep each page's visible footprint coverage (LightmapPageResult::coverage).
+  bool coverageMap = false;
   // Execution.
   int threads = 0;  // 0 = all cores
 };
@@ -111,6 +129,18 @@ struct LightmapPageResult {
   // (lightmap/directional.h). Filled, dilated and stitched like `light`; not denoised.
   Image direction;
   std::vector<uint8_t> valid;  // per texel: 1 = baked and valid, 0 = padding/filled
+  // 1 channel when settings.coverageMap, else empty: the share of each texel's footprint
+  // that is visible surface (not inside geometry), 0 for padding and hidden texels. A texel
+  // holds the mean light over that visible part, so light x coverage is the mean over the
+  // whole footprint with hidden points counted as 0 (what a renderer that bakes hidden
+  // surface points black, such as Cycles, stores): tools/lightmap_compare uses it.
+  Image coverage;
+  // W x H: the variance of each valid texel's luminance (E / pi) as the denoiser takes it
+  // (batch means, corrected for the sequence's faster-than-1/N convergence); 0 elsewhere.
+  // For the denoiser's calibration (chart 1) and tests.
+  std::vector<float> variance;
+  // W x H: paths each covered texel took (0 for padding); with adaptive sampling they differ.
+  std::vector<uint32_t> samples;
   // W x H x 3: world position of each covered texel's main sample point after push-out
   // (the point whose light the texel holds when supersampling is 1); 0 for padding. For
   // tests, debugging and the reference comparison.
@@ -125,6 +155,14 @@ struct LightmapBakeStats {
   // values >= 0 by itself, so this is 0 unless something is wrong: it is reported, not hidden.
   size_t clampedTexels = 0;
   uint64_t rays = 0;        // every ray traced (push-out, integrator, AO)
+  // Paths per texel (stage 5): minimum, mean, maximum; with adaptive sampling they differ.
+  uint32_t minSamples = 0, maxSamples = 0;
+  double meanSamples = 0.0;
+  // Texels whose stage 5 traced [2^b, 2^(b+1)) rays, b = 0..31 (bucket 0 also holds 0 rays).
+  std::array<uint64_t, 32> raysPerTexelHistogram{};
+  // The scene's mean texel luminance (E / pi) the adaptive error floor is relative to; 0
+  // without adaptive sampling.
+  double meanLuminance = 0.0;
   double seconds = 0.0;     // wall time of the stages that trace them (push-out and light)
 };
 

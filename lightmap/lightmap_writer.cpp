@@ -137,6 +137,9 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["lockAtlas"] = o.lockAtlas.empty() ? Json(nullptr) : Json(o.lockAtlas);
   j["samplesPerTexel"] = s.samplesPerTexel;
   j["supersampling"] = s.supersampling;
+  j["errorTarget"] = shortestDecimal(s.errorTarget);
+  j["minSamples"] = s.minSamples;
+  j["errorFloor"] = shortestDecimal(s.errorFloor);
   j["seed"] = s.seed;
   j["bounces"] = s.bounces;
   j["albedoBoost"] = shortestDecimal(s.albedoBoost);
@@ -252,6 +255,13 @@ class LightmapOutputWriter {
       if (Status s = files_.stage(
               fileNames.ao,
               [&](const std::string& p) { return writeExr(p, page.ambientOcclusion); });
+          !s)
+        return s;
+    }
+    if (!page.coverage.empty()) {
+      fileNames.coverage = lightmapFileName(index, "coverage");
+      if (Status s = files_.stage(fileNames.coverage,
+                                  [&](const std::string& p) { return writeExr(p, page.coverage); });
           !s)
         return s;
     }

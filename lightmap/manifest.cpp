@@ -19,7 +19,7 @@ using Json = nlohmann::json;
 constexpr std::pair<const char*, std::string ManifestFiles::*> kFileKinds[] = {
     {"light", &ManifestFiles::light},         {"ao", &ManifestFiles::ao},
     {"direction", &ManifestFiles::direction}, {"shadowmask", &ManifestFiles::shadowmask},
-    {"lightLdr", &ManifestFiles::lightLdr},
+    {"lightLdr", &ManifestFiles::lightLdr},   {"coverage", &ManifestFiles::coverage},
 };
 
 Json pageJson(const ManifestPage& page, size_t index) {
@@ -175,8 +175,17 @@ Manifest bakeManifest(const LightmapBakeResult& result, const std::string& scene
   m.lights = std::move(lights);
   m.scene = std::filesystem::path(scenePath).filename().string();
   m.warnings = result.warnings;
-  m.stats = {result.stats.texels, result.stats.invalidTexels, result.stats.rays,
-             result.stats.clampedTexels};
+  m.stats.texels = result.stats.texels;
+  m.stats.invalidTexels = result.stats.invalidTexels;
+  m.stats.rays = result.stats.rays;
+  m.stats.clampedTexels = result.stats.clampedTexels;
+  m.stats.minSamples = result.stats.minSamples;
+  m.stats.maxSamples = result.stats.maxSamples;
+  m.stats.meanSamples = result.stats.meanSamples;
+  const auto& histogram = result.stats.raysPerTexelHistogram;
+  size_t used = histogram.size();
+  while (used > 0 && histogram[used - 1] == 0) --used;
+  m.stats.raysPerTexelHistogram.assign(histogram.begin(), histogram.begin() + used);
   return m;
 }
 
@@ -223,7 +232,10 @@ Json manifestJson(const Manifest& m) {
   // No times: the files stay deterministic.
   j["stats"] = {
       {"texels", m.stats.texels}, {"invalidTexels", m.stats.invalidTexels}, {"rays", m.stats.rays},
-      {"clampedTexels", m.stats.clampedTexels}};
+      {"clampedTexels", m.stats.clampedTexels},
+      {"samplesPerTexel",
+       {{"min", m.stats.minSamples}, {"mean", m.stats.meanSamples}, {"max", m.stats.maxSamples}}},
+      {"raysPerTexel", m.stats.raysPerTexelHistogram}};
   return j;
 }
 
@@ -385,6 +397,26 @@ Result<Manifest> readManifest(const Json& j, const std::string& where, ManifestU
           (s[key].is_number_integer() && !s[key].is_number_unsigned() && s[key].get<int64_t>() < 0))
         return fail("stats." + std::string(key), "expected an integer >= 0");
       *field = s[key].get<uint64_t>();
+    }
+    if (s.contains("samplesPerTexel")) {
+      const Json& sp = s["samplesPerTexel"];
+      if (!sp.is_object() || !sp.value("min", Json()).is_number_unsigned() ||
+          !sp.value("max", Json()).is_number_unsigned() || !sp.value("mean", Json()).is_number() ||
+          !(sp["mean"].get<double>() >= 0.0))
+        return fail("stats.samplesPerTexel", "expected {\"min\", \"mean\", \"max\"} >= 0");
+      m.stats.minSamples = sp["min"].get<uint64_t>();
+      m.stats.meanSamples = sp["mean"].get<double>();
+      m.stats.maxSamples = sp["max"].get<uint64_t>();
+    }
+    if (s.contains("raysPerTexel")) {
+      const Json& h = s["raysPerTexel"];
+      if (!h.is_array() || h.size() > 64)
+        return fail("stats.raysPerTexel", "expected an array of at most 64 counts");
+      for (const Json& b : h) {
+        if (!b.is_number_unsigned())
+          return fail("stats.raysPerTexel", "expected integers >= 0");
+        m.stats.raysPerTexelHistogram.push_back(b.get<uint64_t>());
+      }
     }
   }
   return m;

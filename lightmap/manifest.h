@@ -34,6 +34,7 @@ struct ManifestFiles {
   std::string ao;          // ambient occlusion EXR
   std::string direction;   // directional mode EXR
   std::string shadowmask;  // shadowmask EXR
+  std::string coverage;    // visible footprint coverage EXR (--coverage-map)
   std::string lightLdr;    // 8-bit PNG of `light` (RGBM or dLDR)
 };
 
@@ -94,6 +95,12 @@ struct ManifestStats {
   uint64_t texels = 0, invalidTexels = 0, rays = 0;
   // Light texels set to 0 by the baker's final guard (LightmapBakeStats::clampedTexels).
   uint64_t clampedTexels = 0;
+  // Paths per texel (adaptive sampling spends them unevenly): "samplesPerTexel":
+  // {"min", "mean", "max"}, and "raysPerTexel": texels whose light stage traced
+  // [2^b, 2^(b+1)) rays, b = 0, 1, ... (trailing empty buckets left out).
+  uint64_t minSamples = 0, maxSamples = 0;
+  double meanSamples = 0.0;
+  std::vector<uint64_t> raysPerTexelHistogram;
 };
 
 struct Manifest {

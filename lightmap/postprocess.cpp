@@ -5,6 +5,8 @@
 // the input buffer alone, so rows can run in parallel and results never depend on threads.
 #include "lightmap/postprocess.h"
 
+#include "src/sampling.h"
+
 #include <algorithm>
 #include <array>
 #include <cassert>
@@ -104,6 +106,39 @@ struct Guides {
     return page.objectId.empty() || page.objectId[i] == page.objectId[j];
   }
 
+  // Calls f(j) for every valid texel j of p's object in the (2r + 1)^2 window around
+  // (x, y) that is geometrically close to p (the guide weight at least 1/2), p included.
+  template <class F>
+  void forEachCompatible(int x, int y, int r, F&& f) const {
+    const int w = page.width(), h = page.height();
+    const size_t i = size_t(y) * w + x;
+    for (int dy = -r; dy <= r; ++dy)
+      for (int dx = -r; dx <= r; ++dx) {
+        const int qx = x + dx, qy = y + dy;
+        if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+        const size_t j = size_t(qy) * w + qx;
+        if (!page.valid[j] || !sameObject(i, j)) continue;
+        if (j != i && geometric(x, y, qx, qy) < 0.5f) continue;
+        f(j);
+      }
+  }
+
+  // Calls f(x, y, i) for every valid texel, rows in parallel.
+  template <class F>
+  void forEachValid(const ParallelOptions& rows, F&& f) const {
+    const int w = page.width();
+    parallelFor(
+        size_t(page.height()),
+        [&](size_t begin, size_t end) {
+          for (size_t yy = begin; yy < end; ++yy)
+            for (int x = 0; x < w; ++x) {
+              const size_t i = yy * size_t(w) + size_t(x);
+              if (page.valid[i]) f(x, int(yy), i);
+            }
+        },
+        rows);
+  }
+
   // Product of the normal and position weights between p and q, q at texel offset
   // (ox, oy) from p.
   float geometric(int px, int py, int qx, int qy) const {
@@ -174,6 +209,78 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
   for (size_t i = 0; i < size.size(); ++i)
     if (page.valid[i] && size[i] <= 0.0f) size[i] = mean;
   return size;
+}
+
+// Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
+constexpr float kDivergenceStep = 0.02f;
+// The per-object SURE test (denoise): standard errors the estimated gain must exceed. 1
+// measured on chart 1 (docs/charts.md): 0 keeps objects whose estimated gain is noise (the
+// denoised error 1.8% above raw at 256 samples), 2 drops gains at 4 samples.
+constexpr double kObjectMargin = 1.0;
+// The safeguard window: (2r + 1)^2 texels.
+constexpr int kSafeguardRadius = 5;
+
+// The safeguard: per texel, the share a of the filtered value f in the output
+// x + a (f - x) (x the raw value) that minimises the expected squared error. With e the
+// raw texel's noise (variance s2), f = truth + b + e_f (b the filter's bias, from blurred
+// gradients; c = cov(e_f, e)) and d = f - x, the error of the output is e + a (b + e_f - e)
+// and its mean square is smallest at a = (s2 - c) / E[d^2] (a Wiener / SURE-style
+// shrinkage). E[d^2] = b^2 + var(d) is measured: the mean of d^2 over the texel's
+// geometrically compatible neighbours of its object in an 11x11 window (one texel's d^2 alone
+// is too noisy a guess; the bias of a blurred gradient is smooth across a few texels). Where the filter
+// only removed noise, d^2 ~ s2 - 2c and a ~ 1; where it moved a texel by much more than the
+// texel's own standard error, the difference is signal and a -> 0 (the raw value stays).
+// s2 is the 3x3 mean of the texels' variance too, so that a texel whose few paths all
+// agreed (variance estimate 0) still trusts its neighbours as much as they do; c ~ self x s2
+// with `self` the texel's share of its own input in f.
+std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Image& filtered,
+                                    const std::vector<float>& sigma,
+                                    const std::vector<float>& divergence,
+                                    const ParallelOptions& rows) {
+  const LightmapPage& page = g.page;
+  const int w = page.width(), h = page.height();
+  std::vector<float> d2(page.texelCount(), 0.0f), blend(page.texelCount(), 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float d = texelLuminance(filtered, x, y) - texelLuminance(raw, x, y);
+      d2[size_t(y) * w + x] = d * d;
+    }
+  g.forEachValid(rows, [&](int x, int y, size_t i) {
+    double sumD2 = 0.0, gain = 0.0;
+    g.forEachCompatible(x, y, kSafeguardRadius, [&](size_t j) {
+      sumD2 += d2[j];
+      gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
+    });
+    blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
+  });
+  return blend;
+}
+
+// Scales each object's valid texels, per channel, so that their sum is the raw sum again:
+// the per-texel blend of the safeguard does not keep it exactly (the filter alone does).
+// A factor > 0 keeps every texel non-negative and keeps texels > 0 above 0.
+void restoreObjectSums(LightmapPage& page, const Image& raw) {
+  const int c = page.radiance.channels;
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  std::vector<double> rawSum(size_t(objects) * c, 0.0), outSum(size_t(objects) * c, 0.0);
+  for (size_t i = 0; i < page.texelCount(); ++i) {
+    if (!page.valid[i] || objectOf(i) < 0) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      rawSum[o] += raw.pixels[k];
+      outSum[o] += page.radiance.pixels[k];
+    }
+  }
+  for (size_t i = 0; i < page.texelCount(); ++i) {
+    if (!page.valid[i] || objectOf(i) < 0) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      if (outSum[o] > 0.0)
+        page.radiance.pixels[k] = float(double(page.radiance.pixels[k]) * rawSum[o] / outSum[o]);
+    }
+  }
 }
 
 }  // namespace
@@ -305,34 +412,19 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     for (size_t i = 0; i < n; ++i) sigma[i] = std::sqrt(std::max(0.0f, page.variance[i]));
   } else {
     std::vector<uint8_t> estimated(n, 0);
-    parallelFor(
-        size_t(h),
-        [&](size_t begin, size_t end) {
-          for (size_t yy = begin; yy < end; ++yy) {
-            const int y = int(yy);
-            for (int x = 0; x < w; ++x) {
-              const size_t i = size_t(y) * w + x;
-              if (!page.valid[i]) continue;
-              std::array<float, 9> lum;
-              int count = 0;
-              for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                  const int qx = x + dx, qy = y + dy;
-                  if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
-                  const size_t j = size_t(qy) * w + qx;
-                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
-                  if (g.geometric(x, y, qx, qy) < 0.5f) continue;
-                  lum[size_t(count++)] = texelLuminance(page.radiance, qx, qy);
-                }
-              if (count < 3) continue;
-              const float med = median(lum.data(), count);
-              for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
-              sigma[i] = kMadToSigma * median(lum.data(), count);
-              estimated[i] = 1;
-            }
-          }
-        },
-        rows);
+    g.forEachValid(rows, [&](int x, int y, size_t i) {
+      std::array<float, 9> lum;
+      int count = 0;
+      g.forEachCompatible(x, y, 1, [&](size_t j) {
+        lum[size_t(count++)] = texelLuminance(page.radiance, int(j % size_t(w)),
+                                              int(j / size_t(w)));
+      });
+      if (count < 3) return;
+      const float med = median(lum.data(), count);
+      for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
+      sigma[i] = kMadToSigma * median(lum.data(), count);
+      estimated[i] = 1;
+    });
     double total = 0.0;
     size_t count = 0;
     for (size_t i = 0; i < n; ++i)
@@ -345,16 +437,71 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       if (page.valid[i] && !estimated[i]) sigma[i] = mean;
   }
 
+  // The à-trous passes over `in` (page.radiance or a perturbed copy): the filtered image.
+  auto filter = [&](const Image& in) -> Image {
   // Variance of each texel's current value, carried through the passes as SVGF does: a
   // weighted mean with weights w has variance sum(w^2 var) / (sum w)^2 (neighbours taken as
   // independent), so the luminance threshold shrinks as the noise does.
   std::vector<float> var(n), nextVar(n, 0.0f);
   for (size_t i = 0; i < n; ++i) var[i] = sigma[i] * sigma[i];
-
-  const Image input = page.radiance;
-  Image src = page.radiance, dst = page.radiance;
+  Image src = in, dst = in;
+  // Pair weight of texels p and q (q at a 5x5 à-trous tap of p), symmetric in p and q:
+  // B3 kernel x geometric guides (the smaller of the two directions) x a Gaussian in the
+  // luminance difference over its own standard error, sqrt(var_p + var_q): neighbours whose
+  // difference the noise explains mix, differences the noise does not explain (edges,
+  // gradients resolved by the samples) stop the filter. As the variance falls, so does every
+  // weight: the filter fades out where the estimate is already converged.
+  std::vector<float> lum(n, 0.0f), rowWeight(n, 0.0f);
   for (int pass = 0; pass < settings.iterations; ++pass) {
     const int step = 1 << pass;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) lum[size_t(y) * w + x] = texelLuminance(src, x, y);
+    auto pairWeight = [&](int x, int y, int kx, int ky, size_t i, size_t j) -> float {
+      const int qx = x + (kx - 2) * step, qy = y + (ky - 2) * step;
+      float wq = kB3[kx] * kB3[ky];
+      wq *= std::min(g.geometric(x, y, qx, qy), g.geometric(qx, qy, x, y));
+      if (wq <= 0.0f) return 0.0f;
+      const float d = lum[j] - lum[i];
+      const float v = var[i] + var[j];
+      const float k = settings.sigmaLuminance;
+      if (!(v > 0.0f)) return d == 0.0f ? wq : 0.0f;
+      return wq * std::exp(-0.5f * d * d / (k * k * v));
+    };
+    auto forEachTap = [&](int x, int y, auto&& f) {
+      const size_t i = size_t(y) * w + x;
+      for (int ky = 0; ky < 5; ++ky) {
+        const int qy = y + (ky - 2) * step;
+        if (qy < 0 || qy >= h) continue;
+        for (int kx = 0; kx < 5; ++kx) {
+          const int qx = x + (kx - 2) * step;
+          if (qx < 0 || qx >= w || (kx == 2 && ky == 2)) continue;
+          const size_t j = size_t(qy) * w + qx;
+          if (!page.valid[j] || !g.sameObject(i, j)) continue;
+          f(kx, ky, j);
+        }
+      }
+    };
+    // Each texel's total weight (its own B3 weight included).
+    parallelFor(
+        size_t(h),
+        [&](size_t begin, size_t end) {
+          for (size_t yy = begin; yy < end; ++yy)
+            for (int x = 0; x < w; ++x) {
+              const int y = int(yy);
+              const size_t i = size_t(y) * w + x;
+              if (!page.valid[i]) continue;
+              double total = double(kB3[2]) * kB3[2];
+              forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                total += pairWeight(x, y, kx, ky, i, j);
+              });
+              rowWeight[i] = float(total);
+            }
+        },
+        rows);
+    // out_p = x_p + sum_q a_pq (x_q - x_p), a_pq = w_pq / max(W_p, W_q): a is symmetric, so
+    // the texels' sum (their mean) is kept exactly, and sum_q a_pq < 1, so out_p is a convex
+    // combination of non-negative values with a positive share of x_p: never negative, and
+    // never 0 where x_p > 0.
     parallelFor(
         size_t(h),
         [&](size_t begin, size_t end) {
@@ -364,35 +511,22 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
             for (int x = 0; x < w; ++x) {
               const size_t i = size_t(y) * w + x;
               if (!page.valid[i]) continue;  // dst already holds the input value
-              const float lp = texelLuminance(src, x, y);
-              const float sl = settings.sigmaLuminance * std::sqrt(var[i]);
+              const float* p = src.at(x, y);
               std::fill(sum.begin(), sum.end(), 0.0);
-              double weight = 0.0, weightedVar = 0.0;
-              for (int ky = 0; ky < 5; ++ky) {
-                const int qy = y + (ky - 2) * step;
-                if (qy < 0 || qy >= h) continue;
-                for (int kx = 0; kx < 5; ++kx) {
-                  const int qx = x + (kx - 2) * step;
-                  if (qx < 0 || qx >= w) continue;
-                  const size_t j = size_t(qy) * w + qx;
-                  if (!page.valid[j] || !g.sameObject(i, j)) continue;
-                  float wq = kB3[kx] * kB3[ky];
-                  if (j != i) {
-                    wq *= g.geometric(x, y, qx, qy);
-                    const float dl = std::abs(texelLuminance(src, qx, qy) - lp);
-                    // sl == 0 (a noise-free texel): only equal luminance mixes.
-                    wq *= sl > 0.0f ? std::exp(-dl / sl) : (dl == 0.0f ? 1.0f : 0.0f);
-                    if (wq <= 0.0f) continue;
-                  }
-                  const float* q = src.at(qx, qy);
-                  for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += double(wq) * q[ch];
-                  weight += wq;
-                  weightedVar += double(wq) * wq * var[j];
-                }
-              }
+              double share = 0.0, outVar = 0.0;
+              forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                const float wq = pairWeight(x, y, kx, ky, i, j);
+                if (wq <= 0.0f) return;
+                const double a = double(wq) / double(std::max(rowWeight[i], rowWeight[j]));
+                const float* q = src.pixels.data() + j * size_t(c);
+                for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += a * (double(q[ch]) - p[ch]);
+                share += a;
+                outVar += a * a * var[j];
+              });
               float* out = dst.at(x, y);
-              for (int ch = 0; ch < c; ++ch) out[ch] = float(sum[size_t(ch)] / weight);
-              nextVar[i] = float(weightedVar / (weight * weight));
+              for (int ch = 0; ch < c; ++ch)
+                out[ch] = float(std::max(0.0, double(p[ch]) + sum[size_t(ch)]));
+              nextVar[i] = float(outVar + (1.0 - share) * (1.0 - share) * var[i]);
             }
           }
         },
@@ -400,14 +534,81 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     std::swap(src, dst);
     std::swap(var, nextVar);
   }
+  return src;
+  };
 
-  if (settings.strength >= 1.0f) {
-    page.radiance = std::move(src);
-    return;
-  }
-  for (size_t k = 0; k < input.pixels.size(); ++k)
-    page.radiance.pixels[k] =
-        input.pixels[k] + settings.strength * (src.pixels[k] - input.pixels[k]);
+  // The divergence of an operator `op` on the page, d op(x)_p / d x_p, by a Monte-Carlo
+  // perturbation (Ramani et al. 2008, "Monte-Carlo SURE"): every texel's luminance moves by
+  // eps_p b_p, b_p = +-1 from a hash of its index and `salt`, and b_p (op(x + eps b)_p -
+  // op(x)_p) / eps_p estimates it (the cross terms b_p b_q d op_p / d x_q average out over
+  // a window). eps_p is a small fraction of the texel's noise, where the weights'
+  // dependence on the values lives.
+  auto divergenceOf = [&](const Image& in, const Image& out, uint64_t salt, auto&& op) {
+    Image perturbed = in;
+    std::vector<float> eps(n, 0.0f), div(n, 0.0f);
+    for (size_t i = 0; i < n; ++i) {
+      if (!page.valid[i]) continue;
+      const float x = texelLuminance(in, int(i % size_t(w)), int(i / size_t(w)));
+      eps[i] = std::max(kDivergenceStep * sigma[i], 1e-5f * std::max(x, 1e-3f));
+      if (mixBits(hashValues(salt, i)) & 1) eps[i] = -eps[i];
+      for (int ch = 0; ch < std::min(c, 3); ++ch)
+        perturbed.pixels[i * size_t(c) + size_t(ch)] += eps[i];
+    }
+    const Image moved = op(perturbed);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const size_t i = size_t(y) * w + x;
+        if (page.valid[i])
+          div[i] = (texelLuminance(moved, x, y) - texelLuminance(out, x, y)) / eps[i];
+      }
+    return div;
+  };
+  // The filter, then the per-texel safeguard (safeguardWeights) on `in`.
+  auto safeguarded = [&](const Image& in) {
+    const Image filtered = filter(in);
+    const std::vector<float> blend = safeguardWeights(
+        g, in, filtered, sigma, divergenceOf(in, filtered, 1, filter), rows);
+    Image out = in;
+    for (size_t i = 0; i < n; ++i) {
+      const float a = settings.strength * blend[i];
+      for (int ch = 0; ch < c; ++ch) {
+        const size_t k = i * size_t(c) + size_t(ch);
+        out.pixels[k] = in.pixels[k] + a * (filtered.pixels[k] - in.pixels[k]);
+      }
+    }
+    return out;
+  };
+  const Image input = page.radiance;
+  page.radiance = safeguarded(input);
+  // Per object, Stein's estimate of the whole result's risk against the raw texels' risk
+  // (sum var): SURE(out) - sum var = sum (out - x)^2 + 2 var (div - 1) over the object's
+  // valid texels, div that of the whole filter-and-safeguard. Where the estimate says the
+  // result is not better than the raw texels (a converged object where choosing the blend
+  // from noisy local estimates costs more than the filter gains), the object keeps its raw
+  // texels. A decision over a whole object averages the noise of hundreds of texels; the
+  // object keeps the filter only when the estimated gain exceeds kObjectMargin times the
+  // spread of the estimate (sqrt of the sum of the squared per-texel terms, which leaves out
+  // their spatial correlation and so understates it): a one-sided test that it helps.
+  const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t i = size_t(y) * w + x;
+      if (!page.valid[i] || objectOf(i) < 0) continue;
+      const double d = texelLuminance(page.radiance, x, y) - texelLuminance(input, x, y);
+      const double t = d * d + 2.0 * double(sigma[i]) * sigma[i] * (double(div[i]) - 1.0);
+      excess[size_t(objectOf(i))] += t;
+      spread[size_t(objectOf(i))] += t * t;
+    }
+  for (size_t i = 0; i < n; ++i)
+    if (page.valid[i] && objectOf(i) >= 0 &&
+        excess[size_t(objectOf(i))] >= -kObjectMargin * std::sqrt(spread[size_t(objectOf(i))]))
+      for (int ch = 0; ch < c; ++ch)
+        page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
+  restoreObjectSums(page, input);
 }
 
 }  // namespace kiln

@@ -91,23 +91,41 @@ struct DenoiseSettings {
   // size, plane = |dot(n_p, x_q - x_p)| the distance of q from p's tangent plane, excess how
   // far |x_q - x_p| exceeds twice the texel distance (charts adjacent in UV but apart in 3D).
   float sigmaPosition = 1.0f;
-  // Luminance weight exp(-|l_p - l_q| / (sigmaLuminance sigma_p)), sigma_p the standard
-  // deviation of p's current value: sqrt(variance) or the spatial estimate at the start,
-  // then carried through the passes as SVGF does (Schied et al. 2017), so the threshold
-  // shrinks with the noise. 3 keeps a 5-sigma shadow edge within ~5% of its level while
-  // reducing flat-region noise ~8x (lightmap_post_test); smaller is sharper and noisier.
-  float sigmaLuminance = 3.0f;
-  // Blend between input (0) and fully filtered (1). 0 returns the page unchanged bit for bit.
+  // Luminance weight exp(-(l_p - l_q)^2 / (2 sigmaLuminance^2 (var_p + var_q))): a Gaussian
+  // in the difference over its own standard error (var = the variance of each texel's
+  // current value: the given variance or the spatial estimate at the start, then carried
+  // through the passes as SVGF does, Schied et al. 2017). Differences the noise explains
+  // mix; the filter fades out as the variance falls, so it does not blur converged light.
+  float sigmaLuminance = 1.5f;
+  // Blend between input (0) and the safeguarded filter output (1). 0 returns the page
+  // unchanged bit for bit.
   float strength = 1.0f;
   ParallelOptions parallel;
 };
 
-// Edge-aware à-trous wavelet filter (Dammertz et al. 2010) of page.radiance, in place: each
-// pass convolves with the 5x5 B3-spline kernel (1/16, 1/4, 3/8, 1/4, 1/16)^2 dilated by the
-// pass's step, multiplied by the normal, position and luminance weights above and
-// renormalised. Only valid texels contribute and only valid texels change; texels of
-// different objects never mix. All channels are filtered with weights from the luminance of
-// the first three (or the first, for grey images). Deterministic at any thread count.
+// Edge-aware, variance-guided à-trous wavelet filter (Dammertz et al. 2010) of
+// page.radiance, in place. Each pass takes the 5x5 B3-spline taps (1/16, 1/4, 3/8, 1/4,
+// 1/16)^2 dilated by the pass's step, with pair weights w_pq = B3 x the normal and position
+// weights (the smaller of both directions) x the luminance weight above, all symmetric in p
+// and q, and moves each texel towards its neighbours: out_p = x_p + sum_q a_pq (x_q - x_p)
+// with a_pq = w_pq / max(W_p, W_q), W the texel's total weight. a is symmetric, so the sum
+// of each object's valid texels (their mean) is unchanged by every pass, and sum_q a_pq < 1,
+// so a texel is a convex combination that keeps a positive share of itself: never negative,
+// never 0 where it was > 0. Only valid texels contribute and change; objects never mix. All
+// channels move with the weights of the luminance of the first three (or the first, for grey
+// images).
+// Then a safeguard, so that the filter does not add error where it blurs light the samples
+// resolved (a gradient along which the luminance weights still mix): each texel becomes
+// x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
+// unbiased risk estimate (SURE) over an 11x11 window of its object, a = sum var_q (1 - div_q)
+// / sum (f_q - x_q)^2, div = d f_q / d x_q estimated by filtering a perturbed copy once more
+// (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
+// moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
+// result (its divergence again by perturbation) against the raw texels' risk (sum var): an
+// object the estimate does not find better by more than the estimate's spread keeps its raw
+// texels. Last, each object's sum
+// per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
+// filter runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
 
 }  // namespace kiln

@@ -115,6 +115,9 @@ Result<std::vector<RasterPage>> rasterizeAtlas(const Scene& scene, const AtlasLa
   if (n < 1 || n > 16)
     return Error{"supersampling must be in [1, 16] (got " + std::to_string(n) + ")"};
 
+  if (settings.subsampleMask && settings.subsampleMask->size() != layout.pages.size())
+    return Error{"subsample mask has " + std::to_string(settings.subsampleMask->size()) +
+                 " pages but the atlas has " + std::to_string(layout.pages.size())};
   std::vector<RasterPage> pages(layout.pages.size());
   std::vector<std::vector<RasterTriangle>> pageTriangles(layout.pages.size());
   for (size_t i = 0; i < pages.size(); ++i) {
@@ -161,6 +164,9 @@ Result<std::vector<RasterPage>> rasterizeAtlas(const Scene& scene, const AtlasLa
       for (int y = y0; y <= y1; ++y) rows[size_t(y)].push_back(i);
     }
 
+    const std::vector<uint8_t>* mask =
+        settings.subsampleMask ? &(*settings.subsampleMask)[pi] : nullptr;
+    assert(!mask || mask->size() == size_t(w) * size_t(h));
     std::vector<RowOutput> out(static_cast<size_t>(h));
     auto rasterRow = [&](int y) {
       std::vector<Accumulator> acc(static_cast<size_t>(w));
@@ -193,7 +199,8 @@ Result<std::vector<RasterPage>> rasterizeAtlas(const Scene& scene, const AtlasLa
             a.bestArea = piece.area;
             a.bestCentroid = piece.centroid;
           }
-          for (int j = 0; j < n * n && n > 1; ++j) {
+          const bool grid = n > 1 && (!mask || (*mask)[size_t(y) * w + x]);
+          for (int j = 0; j < n * n && grid; ++j) {
             const size_t c = size_t(x) * n * n + j;
             if (claim[c] >= 0) continue;
             const dvec2 q(x + (j % n + 0.5) / n, y + (j / n + 0.5) / n);

@@ -26,6 +26,10 @@ struct RasterSettings {
   // Supersampling: n x n points per texel on a regular stratified grid at
   // ((i + 0.5) / n, (j + 0.5) / n); 1 = only the main sample. At most 16.
   int supersampling = 1;
+  // Optional, one W x H mask per page: only texels with mask 1 get supersampling points (the
+  // others get their main sample alone). The baker's second pass uses it to give the
+  // texels next to hidden geometry a finer grid of footprint points (lightmap_baker.cpp).
+  const std::vector<std::vector<uint8_t>>* subsampleMask = nullptr;
   ParallelOptions parallel;  // rows run in parallel; the output does not depend on threads
 };
 
@@ -39,6 +43,9 @@ struct TexelPoint {
   vec3 position{0.0f};
   vec3 normal{0.0f};
   bool pushedOut = false;  // set by the baker's push-out: the point lay inside a solid
+  // Set by the baker's push-out: one of its tangent-plane rays hit a surface within reach
+  // (front or back), so the texel's footprint may be partly hidden by that geometry.
+  bool nearSurface = false;
 };
 
 struct TexelSample {
@@ -49,6 +56,10 @@ struct TexelSample {
   // of the page. May be empty for a sliver no grid point falls on: use `sample`.
   uint32_t firstSubsample = 0;
   uint32_t subsampleCount = 0;
+  // Set by the baker for texels next to geometry: the subsamples are a grid over the
+  // footprint, whose points inside a solid (TexelPoint::pushedOut) are hidden and left out of
+  // the texel's value (the mean over the visible part of the footprint).
+  bool footprintGrid = false;
 
   bool valid() const { return object >= 0; }
 };

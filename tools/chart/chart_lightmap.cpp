@@ -16,7 +16,13 @@ constexpr uint64_t kReferenceTag = 0x7265666572656eULL;  // "referen": the refer
 
 struct ErrorSums {
   double diff2 = 0.0, ref2 = 0.0;
+  double sum = 0.0, refSum = 0.0;  // for the mean ratio
+  // Sum of the baker's per-texel luminance variance and of the squared luminance error:
+  // their ratio says whether the variance the denoiser is given matches the actual error.
+  double variance = 0.0, lumDiff2 = 0.0;
   size_t texels = 0;
+  double relative() const { return ref2 > 0.0 ? std::sqrt(diff2 / ref2) : 0.0; }
+  double ratio() const { return refSum > 0.0 ? sum / refSum : 0.0; }
 };
 
 // Sums over texels valid in both bakes (RGB) of the squared difference and squared reference.
@@ -32,11 +38,32 @@ ErrorSums compareBakes(const LightmapBakeResult& a, const LightmapBakeResult& re
         const double v = double(r.light.pixels[3 * i + c]);
         s.diff2 += d * d;
         s.ref2 += v * v;
+        s.sum += double(x.light.pixels[3 * i + c]);
+        s.refSum += v;
       }
+      if (!x.variance.empty()) s.variance += x.variance[i];
+      const double dl = double(luminance(vec3(x.light.pixels[3 * i], x.light.pixels[3 * i + 1],
+                                              x.light.pixels[3 * i + 2]))) -
+                        double(luminance(vec3(r.light.pixels[3 * i], r.light.pixels[3 * i + 1],
+                                              r.light.pixels[3 * i + 2])));
+      s.lumDiff2 += dl * dl;
       ++s.texels;
     }
   }
   return s;
+}
+
+// One bake of `scene` (loaded from `path`), its wall time in *seconds; advances `progress`.
+Result<LightmapBakeResult> timedLightmapBake(const Scene& scene, const std::string& path,
+                                            const LightmapBakeSettings& settings,
+                                            const std::atomic<bool>* cancel, Progress& progress,
+                                            double* seconds) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Result<LightmapBakeResult> r = bakeLightmaps(scene, settings, false, cancel);
+  *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  progress.advance();
+  if (!r) return Error{path + ": " + r.error()};
+  return r;
 }
 
 }  // namespace
@@ -62,14 +89,8 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
 
   Progress progress("chart lightmap", 1 + samples.size() * denoised.size() * size_t(repeats),
                     "bakes", o.progress);
-  auto timedBake = [&](const LightmapBakeSettings& settings,
-                       double* seconds) -> Result<LightmapBakeResult> {
-    const auto t0 = std::chrono::steady_clock::now();
-    Result<LightmapBakeResult> r = bakeLightmaps(*scene, settings, false, o.cancel);
-    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    progress.advance();
-    if (!r) return Error{path + ": " + r.error()};
-    return r;
+  auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
+    return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
 
   // The reference: the same bake with 16x the largest sample count and an independent seed,
@@ -112,8 +133,9 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
   ChartTable t;
   t.name = "lightmap_samples";
   t.title = "Lightmap: samples per texel vs error vs bake time (cornell_box)";
-  t.columns = {"variant", "samples", "relative_rms_error", "rms_error", "bake_seconds",
-               "light_seconds", "rays", "texels", "repeats", "reference_samples"};
+  t.columns = {"variant", "samples", "relative_rms_error", "rms_error", "mean_ratio",
+               "variance_ratio", "bake_seconds", "light_seconds", "rays", "texels", "repeats",
+               "reference_samples"};
   std::vector<double> xs, ys;
   for (size_t v = 0; v < denoised.size(); ++v)
     for (size_t k = 0; k < samples.size(); ++k) {
@@ -126,6 +148,8 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
         ys.push_back(rel);
       }
       t.addRow({denoised[v] ? "denoised" : "raw", std::to_string(samples[k]), num(rel), num(rms),
+                num(c.error.ratio()),
+                num(c.error.lumDiff2 > 0.0 ? c.error.variance / c.error.lumDiff2 : 0.0),
                 num(median(c.wall)), num(median(c.light)), std::to_string(c.rays),
                 std::to_string(c.error.texels), std::to_string(repeats),
                 std::to_string(referenceSamples)});
@@ -142,7 +166,11 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
                     std::to_string(referenceSamples) + " samples/texel and an independent seed (" +
                     num(refSeconds) + " s)");
   t.notes.push_back("relative_rms_error = sqrt(sum (x - ref)^2 / sum ref^2) over RGB of the "
-                    "texels valid in both; rms_error in lightmap units (E / pi)");
+                    "texels valid in both; rms_error in lightmap units (E / pi); mean_ratio = "
+                    "sum x / sum ref over the same texels; variance_ratio = sum of the "
+                    "baker's per-texel luminance variance (what the denoiser is given) / sum of "
+                    "the squared luminance error, over the same texels (1 = calibrated; the "
+                    "reference's own noise adds about 1/16 of the 1024-sample variance)");
   t.notes.push_back("timing: bake_seconds = wall time of bakeLightmaps (all stages), "
                     "light_seconds = its light stage; median of " + std::to_string(repeats) +
                     " repeats, interleaved (each round bakes every variant and count once)");
@@ -168,6 +196,108 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
       " / column('samples')) : NaN) with lines dt 2 lc rgb 'gray40' title '1/sqrt(N) guide', \\\n"
       "  '' using 'samples':(strcol('variant') eq 'raw' ? column('bake_seconds') : NaN) axes "
       "x1y2 with linespoints dt 3 pt 6 lc rgb 'dark-orange' title 'bake time (right axis)'\n";
+  return t;
+}
+
+}  // namespace kiln::chart
+
+namespace kiln::chart {
+
+// Chart 7: bake time vs error with a fixed count per texel and with adaptive sampling
+// (errorTarget), both denoised, against the same kind of reference as chart 1.
+Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
+  const std::string path = o.scenesDir + "/cornell_box.gltf";
+  Result<Scene> scene = loadScene(path);
+  if (!scene) return Error{scene.error()};
+  LightmapBakeSettings s;
+  s.resolution = o.quick ? 8.0f : 14.0f;
+  s.maxSize = 256;
+  s.bounces = 3;
+  s.stitchSeams = false;
+  s.seed = o.seed;
+  s.threads = o.threads;
+  const std::vector<int> counts =
+      o.quick ? std::vector<int>{16, 64} : std::vector<int>{16, 64, 256, 1024};
+  const std::vector<float> targets =
+      o.quick ? std::vector<float>{0.1f, 0.05f} : std::vector<float>{0.2f, 0.1f, 0.05f, 0.025f};
+  const int cap = 4096;
+  const int referenceSamples = o.quick ? 1024 : 16384;
+  const int repeats = o.quick ? 1 : 3;
+  Progress progress("chart adaptive", 1 + (counts.size() + targets.size()) * size_t(repeats),
+                    "bakes", o.progress);
+  auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
+    return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
+  };
+  LightmapBakeSettings refSettings = s;
+  refSettings.denoise = false;
+  refSettings.samplesPerTexel = referenceSamples;
+  refSettings.seed = hashValues(o.seed, kReferenceTag);
+  double refSeconds = 0.0;
+  Result<LightmapBakeResult> reference = timedBake(refSettings, &refSeconds);
+  if (!reference) return Error{reference.error()};
+
+  struct Variant {
+    bool adaptive;
+    float target;
+    int samples;
+  };
+  std::vector<Variant> variants;
+  for (int c : counts) variants.push_back({false, 0.0f, c});
+  for (float e : targets) variants.push_back({true, e, cap});
+  struct Cell {
+    std::vector<double> wall;
+    ErrorSums error;
+    uint64_t rays = 0;
+    double meanSamples = 0.0;
+  };
+  std::vector<Cell> cells(variants.size());
+  for (int r = 0; r < repeats; ++r)
+    for (size_t v = 0; v < variants.size(); ++v) {
+      LightmapBakeSettings settings = s;
+      settings.samplesPerTexel = variants[v].samples;
+      settings.errorTarget = variants[v].target;
+      double wall = 0.0;
+      Result<LightmapBakeResult> bake = timedBake(settings, &wall);
+      if (!bake) return Error{bake.error()};
+      cells[v].wall.push_back(wall);
+      if (r == 0) {
+        cells[v].error = compareBakes(*bake, *reference);
+        cells[v].rays = bake->stats.rays;
+        cells[v].meanSamples = bake->stats.meanSamples;
+      }
+    }
+  progress.finish();
+
+  ChartTable t;
+  t.name = "lightmap_adaptive";
+  t.title = "Lightmap: bake time vs error, fixed samples vs adaptive (cornell_box, denoised)";
+  t.columns = {"variant", "error_target", "mean_samples", "relative_rms_error", "mean_ratio",
+               "bake_seconds", "rays", "repeats", "reference_samples"};
+  for (size_t v = 0; v < variants.size(); ++v) {
+    const Cell& c = cells[v];
+    t.addRow({variants[v].adaptive ? "adaptive" : "fixed", num(variants[v].target),
+              num(c.meanSamples), num(c.error.relative()), num(c.error.ratio()),
+              num(median(c.wall)), std::to_string(c.rays), std::to_string(repeats),
+              std::to_string(referenceSamples)});
+  }
+  t.notes = commonNotes(o, o.threads);
+  t.notes.push_back("chart 7: lightmap bake time vs error, fixed samples per texel vs adaptive "
+                    "sampling (errorTarget, cap " + std::to_string(cap) + "), denoiser on");
+  t.notes.push_back("scene: " + path + "; settings as chart 1 (resolution " + num(s.resolution) +
+                    ", 3 bounces, supersampling 1, stitching off)");
+  t.notes.push_back("baseline: a " + std::to_string(referenceSamples) +
+                    "-sample bake with the denoiser off and an independent seed (" +
+                    num(refSeconds) + " s); error as chart 1");
+  t.plot =
+      "set logscale xy\n"
+      "set format y '%g'\n"
+      "set xlabel 'bake time (s)'\n"
+      "set ylabel 'relative RMS error vs reference'\n"
+      "set key top right\n"
+      "plot @CSV@ using 'bake_seconds':(strcol('variant') eq 'fixed' ? "
+      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 7 title 'fixed samples', "
+      "\\\n  '' using 'bake_seconds':(strcol('variant') eq 'adaptive' ? "
+      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 5 title 'adaptive'\n";
   return t;
 }
 

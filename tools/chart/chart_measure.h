@@ -42,6 +42,8 @@ Result<ChartTable> shIrradianceChart(const ChartOptions& options);
 Result<ChartTable> tetrahedralizationChart(const ChartOptions& options);
 Result<ChartTable> probeLookupChart(const ChartOptions& options);
 Result<ChartTable> probeVisibilityChart(const ChartOptions& options);
+// Chart 7 (chart_lightmap.cpp): bake time vs error, fixed samples vs adaptive sampling.
+Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& options);
 
 // Notes every chart's CSV starts with: the command, the machine, threads, seed.
 std::vector<std::string> commonNotes(const ChartOptions& options, int threadsUsed);

@@ -10,7 +10,8 @@ namespace kiln::chart {
 
 const std::vector<std::string>& chartNames() {
   static const std::vector<std::string> names = {"lightmap",           "placement", "sh",
-                                                 "tetrahedralization", "lookup",    "visibility"};
+                                                 "tetrahedralization", "lookup",    "visibility",
+                                                 "adaptive"};
   return names;
 }
 
@@ -32,8 +33,8 @@ Result<ChartRunReport> runCharts(const ChartOptions& options, const std::string&
   for (const std::string& n : only)
     if (std::find(chartNames().begin(), chartNames().end(), n) == chartNames().end())
       return Error{"unknown chart '" + n +
-                   "' (expected lightmap, placement, sh, tetrahedralization, lookup or "
-                   "visibility)"};
+                   "' (expected lightmap, placement, sh, tetrahedralization, lookup, "
+                   "visibility or adaptive)"};
   std::error_code ec;
   std::filesystem::create_directories(outDir, ec);
   if (ec || !std::filesystem::is_directory(outDir))
@@ -43,7 +44,8 @@ Result<ChartRunReport> runCharts(const ChartOptions& options, const std::string&
   using Measure = std::function<Result<ChartTable>(const ChartOptions&)>;
   const std::vector<Measure> measures = {lightmapSamplesChart, probePlacementChart,
                                          shIrradianceChart,    tetrahedralizationChart,
-                                         probeLookupChart,     probeVisibilityChart};
+                                         probeLookupChart,     probeVisibilityChart,
+                                         lightmapAdaptiveChart};
   ChartRunReport report;
   report.gnuplot = findGnuplot();
   report.gnuplotMissing = report.gnuplot.empty();

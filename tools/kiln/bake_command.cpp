@@ -38,6 +38,9 @@ struct BakeOptions {
   std::string out;
   std::string preset;
   std::optional<int> samples;
+  std::optional<float> errorTarget;
+  bool coverageMap = false;
+  bool footprintGrid = false;
   std::optional<float> resolution;
   std::optional<int> maxSize;
   std::optional<int> padding;
@@ -189,7 +192,14 @@ int runBake(const BakeOptions& o) {
   if (!o.lightingMode.empty()) settings.lightingMode = *parseLightingMode(o.lightingMode);
   if (shadowColor) settings.shadowColor = *shadowColor;
   if (o.directional) settings.directional = true;
-  if (o.samples) settings.samplesPerTexel = *o.samples;
+  // --samples alone is a fixed count per texel; with --error-target it is the cap.
+  if (o.samples) {
+    settings.samplesPerTexel = *o.samples;
+    settings.errorTarget = 0.0f;
+  }
+  if (o.errorTarget) settings.errorTarget = *o.errorTarget;
+  if (o.coverageMap) settings.coverageMap = true;
+  if (o.footprintGrid) settings.footprintGrid = true;
   if (o.resolution) settings.resolution = *o.resolution;
   if (o.maxSize) settings.maxSize = *o.maxSize;
   if (o.padding) settings.padding = *o.padding;
@@ -229,7 +239,11 @@ int runBake(const BakeOptions& o) {
 
   if (!o.quiet)
     std::cerr << "kiln: baking " << scene.path << ": " << settings.resolution
-              << " texels/unit, " << settings.samplesPerTexel << " samples/texel, "
+              << " texels/unit, "
+              << (settings.errorTarget > 0.0f
+                      ? "error target " + std::to_string(settings.errorTarget) + " (at most " +
+                            std::to_string(settings.samplesPerTexel) + " samples/texel), "
+                      : std::to_string(settings.samplesPerTexel) + " samples/texel, ")
               << settings.bounces << " bounces" << (preset.empty() ? "" : ", preset " + preset)
               << "\n";
   Result<LightmapBakeResult> baked = bakeLightmaps(scene, settings, !o.quiet, &cancelFlag());
@@ -261,7 +275,9 @@ int runBake(const BakeOptions& o) {
          << pageTexels << " texels, "
          << (pageTexels > 0 ? 100.0 * double(st.texels) / double(pageTexels) : 0.0)
          << "% baked), " << st.texels << " baked texels (" << st.invalidTexels << " invalid), "
-         << charts << " charts in generated UVs, " << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
+         << charts << " charts in generated UVs, " << st.minSamples << "/" << st.meanSamples
+         << "/" << st.maxSamples << " paths per texel (min/mean/max), "
+         << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
          << humanCount(st.seconds > 0 ? double(st.rays) / st.seconds : 0.0)
          << " rays/s); total " << seconds << " s\n";
     std::cerr << line.str();
@@ -283,8 +299,20 @@ void registerBakeCommand(CLI::App& app) {
   b->add_option("--preset", o->preset,
                 "Quality preset (default: the scene's extras.kiln.quality, else none)")
       ->check(CLI::IsMember({"preview", "low", "medium", "high", "production"}));
-  b->add_option("--samples", o->samples, "Paths per texel (overrides the preset)")
+  b->add_option("--samples", o->samples,
+                "Paths per texel, the same for every texel (overrides the preset's adaptive "
+                "sampling); with --error-target, the cap")
       ->check(CLI::Range(1, 1 << 24));
+  b->add_option("--error-target", o->errorTarget,
+                "Adaptive sampling: each texel takes paths until the standard error of its "
+                "mean is at most this share of its value (plus a floor); 0 = off")
+      ->check(CLI::Range(0.0f, 1.0f));
+  b->add_flag("--footprint-grid", o->footprintGrid,
+              "Texels next to geometry average the visible part of their footprint (4 x 4 "
+              "points; experimental: mixes both sides of thin walls)");
+  b->add_flag("--coverage-map", o->coverageMap,
+              "Also write lightmap-<i>_coverage.exr: the visible share of each texel's "
+              "footprint (for comparisons with renderers that bake hidden points black)");
   b->add_option("--resolution", o->resolution,
                 "Texels per world unit, before each object's scaleInLightmap")
       ->check(CLI::Range(1e-6f, 1e5f));

@@ -22,6 +22,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-rmse", maxRmse, "Fail (exit 3) when the overall relative RMSE exceeds this");
   app.add_option("--max-ratio-error", maxRatioError,
                  "Fail (exit 3) when |overall mean ratio - 1| exceeds this");
+  int worst = 0;
+  app.add_option("--worst", worst, "Also list the N texels with the largest squared error");
   std::string dump;
   app.add_option("--dump", dump,
                  "Write <node>_kiln.png / <node>_ref.png (x 2, clamped) into this folder to look at");
@@ -30,12 +32,38 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  kiln::Result<kiln::ReferenceComparison> c = kiln::compareWithReference(reference, bake, !dump.empty());
+  kiln::Result<kiln::ReferenceComparison> c =
+      kiln::compareWithReference(reference, bake, !dump.empty() || worst > 0);
   if (!c) {
     std::cerr << "kiln_compare_reference: error: " << c.error() << "\n";
     return 1;
   }
   std::cout << kiln::formatReferenceTable(*c);
+  if (worst > 0) {
+    // Compared texels are those where either image is non-zero (kiln's image is 0 elsewhere).
+    struct Texel {
+      double error;
+      const kiln::ObjectReferenceError* object;
+      int x, y;
+    };
+    std::vector<Texel> texels;
+    for (const kiln::ObjectReferenceError& o : c->objects)
+      for (int y = 0; y < o.kiln.height; ++y)
+        for (int x = 0; x < o.kiln.width; ++x) {
+          const kiln::vec3 d = o.kiln.rgb(x, y) - o.reference.rgb(x, y);
+          if (o.kiln.rgb(x, y) == kiln::vec3(0.0f)) continue;
+          texels.push_back({double(glm::dot(d, d)), &o, x, y});
+        }
+    const size_t n = std::min(texels.size(), size_t(worst));
+    std::partial_sort(texels.begin(), texels.begin() + long(n), texels.end(),
+                      [](const Texel& a, const Texel& b) { return a.error > b.error; });
+    for (size_t i = 0; i < n; ++i) {
+      const Texel& t = texels[i];
+      const kiln::vec3 k = t.object->kiln.rgb(t.x, t.y), r = t.object->reference.rgb(t.x, t.y);
+      std::printf("%-12s (%3d, %3d)  kiln %.4f %.4f %.4f  reference %.4f %.4f %.4f\n",
+                  t.object->node.c_str(), t.x, t.y, k.r, k.g, k.b, r.r, r.g, r.b);
+    }
+  }
   for (const kiln::ObjectReferenceError& o : c->objects) {
     if (dump.empty()) break;
     // Crop to the compared texels and enlarge 4x (nearest), so the images can be looked at.

@@ -30,7 +30,8 @@ namespace fs = std::filesystem;
 // shadow edge is a large part of the value. The reference compared with itself stays exact.
 constexpr int kFootprintSamples = 8;
 
-vec3 sampleFootprint(const Image& atlas, int x, int y, int w, int h, vec2 scale, vec2 offset) {
+vec3 sampleFootprint(const Image& atlas, const Image* coverage, int x, int y, int w, int h,
+                     vec2 scale, vec2 offset) {
   glm::dvec3 sum(0.0);
   for (int j = 0; j < kFootprintSamples; ++j)
     for (int i = 0; i < kFootprintSamples; ++i) {
@@ -39,7 +40,8 @@ vec3 sampleFootprint(const Image& atlas, int x, int y, int w, int h, vec2 scale,
       const vec2 a = uv * scale + offset;
       const int ax = std::clamp(int(std::floor(a.x * float(atlas.width))), 0, atlas.width - 1);
       const int ay = std::clamp(int(std::floor(a.y * float(atlas.height))), 0, atlas.height - 1);
-      sum += glm::dvec3(atlas.rgb(ax, ay));
+      const double visible = coverage ? double(coverage->at(ax, ay)[0]) : 1.0;
+      sum += glm::dvec3(atlas.rgb(ax, ay)) * visible;
     }
   return vec3(sum / double(kFootprintSamples * kFootprintSamples));
 }
@@ -77,7 +79,7 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
 
   std::map<int, const ManifestObject*> bakedObjects;
   for (const ManifestObject& o : manifest->objects) bakedObjects[o.nodeIndex] = &o;
-  std::map<int, Image> pages;  // loaded on first use
+  std::map<int, Image> pages, coverages;  // loaded on first use
 
   ReferenceComparison comparison;
   for (const Json& ref : (*index)["objects"]) {
@@ -103,8 +105,19 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
       Result<Image> img = readHdrImage((outDir / file).string());
       if (!img) return Error{img.error()};
       pages[page] = std::move(img).value();
+      const std::string& coverageFile = manifest->lightmaps[size_t(page)].files.coverage;
+      if (!coverageFile.empty()) {
+        Result<Image> cov = readHdrImage((outDir / coverageFile).string());
+        if (!cov) return Error{cov.error()};
+        if (cov->width != pages[page].width || cov->height != pages[page].height)
+          return Error{manifestPath + ": lightmap " + std::to_string(page) +
+                       ": the coverage map and the light map differ in size"};
+        coverages[page] = std::move(cov).value();
+      }
     }
     const Image& atlas = pages[page];
+    const Image* coverage = coverages.count(page) ? &coverages[page] : nullptr;
+    result.coverageWeighted = coverage != nullptr;
 
     Result<Image> refImage = readHdrImage((refDir / ref.value("file", result.node + ".exr")).string());
     if (!refImage) return Error{refImage.error()};
@@ -126,7 +139,7 @@ Result<ReferenceComparison> compareWithReference(const std::string& referenceDir
         for (int dy = -1; dy <= 1 && inside; ++dy)
           for (int dx = -1; dx <= 1 && inside; ++dx) inside = covered(x + dx, y + dy);
         if (!inside) continue;
-        const vec3 k = sampleFootprint(atlas, x, y, w, h, scale, offset), r = refImage->rgb(x, y);
+        const vec3 k = sampleFootprint(atlas, coverage, x, y, w, h, scale, offset), r = refImage->rgb(x, y);
         bool hiddenNeighbour = false;
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {

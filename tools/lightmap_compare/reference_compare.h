@@ -48,6 +48,8 @@ struct ObjectReferenceError {
   int nodeIndex = -1;
   ReferenceErrorSums sums;     // every compared texel
   ReferenceErrorSums visible;  // without texels next to hidden ones
+  // The bake has a coverage map (kiln bake --coverage-map) and lookups were weighted by it.
+  bool coverageWeighted = false;
   // With keepImages: kiln's lightmap resampled onto the reference's texels (0 where the
   // texel is not compared), and the reference itself.
   Image kiln, reference;
