@@ -315,22 +315,27 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
       }
     }
   }
+  // The per-slot loops test first and build their message only on failure (a 100k-probe
+  // set has millions of slots).
+  auto slotField = [](const char* array, size_t c, int k) {
+    return std::string(array) + "[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+  };
   for (size_t c = 0; c < nc; ++c) {
     const bool isOuter = c >= size_t(s.innerCellCount);
     const int used = usedSlots(s.dimension, isOuter);
     for (int k = 0; k < 4; ++k) {
       const int32_t v = s.cells[c][k];
-      const std::string field = "cells[" + std::to_string(c) + "][" + std::to_string(k) + "]";
       if (k < used && (v < 0 || size_t(v) >= np)) {
-        return fail(name, field + ": probe index " + std::to_string(v) +
+        return fail(name, slotField("cells", c, k) + ": probe index " + std::to_string(v) +
                               " out of range (probeCount " + std::to_string(np) + ")");
       }
-      if (k >= used && v != -1) return fail(name, field + ": unused slot must be -1");
+      if (k >= used && v != -1) {
+        return fail(name, slotField("cells", c, k) + ": unused slot must be -1");
+      }
       const int32_t n = s.neighbours[c][k];
-      const std::string nfield =
-          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
       if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
-        return fail(name, nfield + ": cell index " + std::to_string(n) + " out of range");
+        return fail(name, slotField("neighbours", c, k) + ": cell index " + std::to_string(n) +
+                              " out of range");
       }
     }
   }
@@ -338,13 +343,11 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
   for (size_t c = 0; c < nc; ++c) {
     for (int k = 0; k < 4; ++k) {
       const int32_t n = s.neighbours[c][k];
-      const std::string nfield =
-          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
       if (n >= 0) {
         const glm::ivec4 back = s.neighbours[size_t(n)];
         const int32_t ci = int32_t(c);
         if (back[0] != ci && back[1] != ci && back[2] != ci && back[3] != ci) {
-          return fail(name, nfield + ": cell " + std::to_string(n) +
+          return fail(name, slotField("neighbours", c, k) + ": cell " + std::to_string(n) +
                                 " does not link back (asymmetric neighbours)");
         }
       }
