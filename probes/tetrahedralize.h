@@ -40,8 +40,11 @@ struct ProbeTopologySettings {
 
 // Builds the topology for `positions` (world space, metres). The result has zero SH and
 // validity 1 for every probe (the SH bake fills them), cells in a canonical order (each cell's
-// smallest probe index first where orientation allows, cells sorted), so two backends that
-// produce the same triangulation produce identical ProbeSets. Warnings (degenerate input) are
+// smallest probe index first where orientation allows; tetrahedra along a Morton curve
+// through their centroids, ties by probe indices, so that cells near in space are near in
+// memory; outer cells sorted by probe indices), so two backends that produce the same
+// triangulation produce identical ProbeSets. Probes keep the caller's order (their indices
+// are the caller's). The backends' own adjacency gives the neighbours. Warnings (degenerate input) are
 // appended to *warnings when given. Errors: no probes, non-finite positions, backend failure.
 // Thread-safe (no shared state).
 Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,

@@ -249,17 +249,22 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
   set.grid.max = hi;
   const glm::ivec3 n = set.grid.size;
   std::vector<int32_t> seeds(size_t(n.x) * n.y * n.z, 0);
-  int32_t hint = 0;
+  // Each seed is found by a walk from its neighbour's: the previous grid cell of the row, or
+  // at a row's start the start of the previous row (or layer), never the far end of a row.
+  ProbeBlendSettings cellOnly;
+  cellOnly.visibility = false;
+  auto index = [&](int x, int y, int z) {
+    return size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * size_t(z));
+  };
   for (int z = 0; z < n.z; ++z) {
     for (int y = 0; y < n.y; ++y) {
+      int32_t hint = y > 0 ? seeds[index(0, y - 1, z)] : z > 0 ? seeds[index(0, 0, z - 1)] : 0;
       for (int x = 0; x < n.x; ++x) {
         const glm::vec3 f = (glm::vec3(x, y, z) + 0.5f) / glm::vec3(n);
         const glm::vec3 p = lo + f * (hi - lo);
-        ProbeBlendSettings cellOnly;
-        cellOnly.visibility = false;
         const ProbeLocation loc = locateProbe(set, p, hint, cellOnly);
         hint = loc.cell >= 0 ? loc.cell : 0;
-        seeds[size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * z)] = hint;
+        seeds[index(x, y, z)] = hint;
       }
     }
   }
