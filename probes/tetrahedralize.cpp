@@ -635,6 +635,7 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.outerCells.size() != set.cells.size() - size_t(set.innerCellCount)) {
     set.outerCells.resize(set.cells.size() - size_t(set.innerCellCount));
   }
+  prepareProbeLookup(set);  // the seed grid's walks use it too
   buildProbeSeedGrid(set, settings.cellsPerSeed);
   Status st = validateProbeSet(set, "buildProbeTopology");
   if (!st) return Error{st.error()};

@@ -475,6 +475,7 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
   }
   Status st = validateProbeSet(s, name);
   if (!st) return Error{st.error()};
+  prepareProbeLookup(s);
   return s;
 }
 
