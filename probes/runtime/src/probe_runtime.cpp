@@ -577,9 +577,8 @@ ProbeLocation locate(const ProbeSet& s, glm::vec3 p, int32_t hint,
 // A cell's walk rows; false when the float map cannot be made accurate to 1.07 u per entry.
 // The edges are float differences, exact in double unless the coordinates' exponents differ
 // by more than 29 (checked); each row is a cross product of two edges over the determinant:
-// the cross products by Kahan's FMA algorithm (2 ulp of double), the determinant accurate to
-// u / 16 unless the cell is a sliver with sum_j |e1_j c_j| > 6e6 det (checked), then one
-// rounding to float (u).
+// the cross products accurate to 2^-49 relative, the determinant to u / 16 (checked with its
+// error bound: a sliver fails), then one rounding to float (u).
 bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
   dvec3 e[3];
   for (int j = 0; j < 3; ++j) {
@@ -592,17 +591,34 @@ bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
       e[j][a] = d;
     }
   }
-  auto diff = [](double a, double b, double c, double d) {  // a b - c d (Kahan)
-    const double w = c * d;
-    return std::fma(a, b, -w) + std::fma(-c, d, w);
+  // a b - c d and a bound on its error: plain double (within 2^-53 (|a b| + |c d|)) unless it
+  // cancels below 1/8 of that, where Kahan's FMA algorithm (1.5 ulp) takes over. Either way
+  // each component is accurate to 2^-49 relative.
+  struct Value {
+    double v, error;
   };
-  auto cross = [&](dvec3 a, dvec3 b) {
-    return dvec3(diff(a.y, b.z, a.z, b.y), diff(a.z, b.x, a.x, b.z), diff(a.x, b.y, a.y, b.x));
+  auto diff = [](double a, double b, double c, double d) {
+    const double ab = a * b, cd = c * d, plain = ab - cd;
+    const double size = std::fabs(ab) + std::fabs(cd);
+    if (std::fabs(plain) >= 0.125 * size) return Value{plain, 0x1p-52 * size};
+    const double kahan = std::fma(a, b, -cd) + std::fma(-c, d, cd);
+    return Value{kahan, 0x1p-51 * std::fabs(kahan)};
   };
-  const dvec3 c[3] = {cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])};
+  dvec3 c[3], error[3];
+  for (int k = 0; k < 3; ++k) {
+    const dvec3 a = e[(k + 1) % 3], b = e[(k + 2) % 3];
+    const Value x = diff(a.y, b.z, a.z, b.y), y = diff(a.z, b.x, a.x, b.z),
+                z = diff(a.x, b.y, a.y, b.x);
+    c[k] = dvec3(x.v, y.v, z.v);
+    error[k] = dvec3(x.error, y.error, z.error);
+  }
+  // det = e_0 . c_0 within the components' errors plus the dot product's rounding (3 ulp of
+  // sum |e_0j c_0j|); the rows need it to u / 16 = 2^-28 relative, else the cell is a sliver
+  // left to the exact path.
   const double det = glm::dot(e[0], c[0]);
-  const double magnitude = glm::dot(glm::abs(e[0]), glm::abs(c[0]));
-  if (!(det > 0.0) || !(magnitude <= 6e6 * det)) return false;
+  const double detError = glm::dot(glm::abs(e[0]), error[0]) +
+                          0x1p-51 * glm::dot(glm::abs(e[0]), glm::abs(c[0]));
+  if (!(det > 0.0) || !(detError <= 0x1p-28 * det)) return false;
   for (int k = 0; k < 3; ++k) {
     for (int a = 0; a < 3; ++a) {
       const float f = float(c[k][a] / det);
