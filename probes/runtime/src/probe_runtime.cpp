@@ -379,13 +379,8 @@ void locate3Fast(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& lo
       float l[4];
       int exit = fastStep(w, p, l);
       if (exit == -1) {
-        // Every l_k > e_k > 0: normalise in float (their sum is 1 within a few u).
-        const glm::ivec4 t = s.cells[size_t(cell)];
-        const float inverse = 1.0f / (((l[0] + l[1]) + l[2]) + l[3]);
-        loc.cell = cell;
-        loc.probes = {t[0], t[1], t[2], t[3]};
-        loc.weights = {l[0] * inverse, l[1] * inverse, l[2] * inverse, l[3] * inverse};
-        loc.barycentric = loc.weights;
+        const double b[4] = {l[0], l[1], l[2], l[3]};
+        setTet(s, loc, cell, b);
         return;
       }
       if (exit == -2) {
