@@ -289,32 +289,6 @@ void scan3(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc) {
   }
 }
 
-void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc) {
-  for (int step = 0; step < kMaxWalkSteps; ++step) {
-    loc.steps = uint16_t(std::min(step + 1, 65535));
-    int32_t next;
-    if (cell < s.innerCellCount) {
-      double b[4];
-      const int exit = evalTet(s, cell, p, b);
-      if (exit < 0) {
-        setTet(s, loc, cell, b);
-        return;
-      }
-      next = s.neighbours[cell][exit];
-    } else {
-      const OuterEval e = evalOuter(s, cell, p);
-      if (e.exit < 0) {
-        setOuter(s, loc, cell, e.w);
-        return;
-      }
-      next = s.neighbours[cell][e.exit];
-    }
-    if (next < 0) break;
-    cell = next;
-  }
-  scan3(s, p, loc);
-}
-
 // ---- dimension 3: the float fast path ----------------------------------------------------
 //
 // A step computes p's barycentric coordinates l_k in float from the cell's record
@@ -369,19 +343,23 @@ inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
   return k;
 }
 
-void locate3Fast(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc) {
-  const ProbeWalkCell* walk = s.walk.data();
+// The walk: with `walk` (the set's records) each step tries fastStep first; without, every
+// step is exact (locateProbeExact).
+void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
+             const ProbeWalkCell* walk) {
   for (int step = 0; step < kMaxWalkSteps; ++step) {
     loc.steps = uint16_t(std::min(step + 1, 65535));
     int32_t next;
     if (cell < s.innerCellCount) {
-      const ProbeWalkCell& w = walk[cell];
-      float l[4];
-      int exit = fastStep(w, p, l);
-      if (exit == -1) {
-        const double b[4] = {l[0], l[1], l[2], l[3]};
-        setTet(s, loc, cell, b);
-        return;
+      int exit = -2;
+      if (walk) {
+        float l[4];
+        exit = fastStep(walk[cell], p, l);
+        if (exit == -1) {
+          const double b[4] = {l[0], l[1], l[2], l[3]};
+          setTet(s, loc, cell, b);
+          return;
+        }
       }
       if (exit == -2) {
         double b[4];
@@ -391,7 +369,7 @@ void locate3Fast(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& lo
           return;
         }
       }
-      next = w.next[exit];
+      next = walk ? walk[cell].next[exit] : s.neighbours[cell][exit];
     } else {
       const OuterEval e = evalOuter(s, cell, p);
       if (e.exit < 0) {
@@ -548,10 +526,9 @@ ProbeLocation locate(const ProbeSet& s, glm::vec3 p, int32_t hint,
       if (hint < 0 || hint >= s.cellCount()) hint = 0;
       if (s.dimension == 2) {
         locate2(s, p, hint, loc);
-      } else if (fast && s.walk.size() == size_t(s.innerCellCount)) {
-        locate3Fast(s, p, hint, loc);
       } else {
-        locate3(s, p, hint, loc);
+        const bool useWalk = fast && s.walk.size() == size_t(s.innerCellCount);
+        locate3(s, p, hint, loc, useWalk ? s.walk.data() : nullptr);
       }
       break;
     }
