@@ -29,9 +29,7 @@ namespace kiln {
 enum class DelaunayBackend { TetGen, Cgal };
 
 struct ProbeTopologySettings {
-  // CGAL by default (about twice as fast as TetGen on random probes, same cells in general
-  // position). TetGen is AGPLv3 and only ever linked into the bake tools, never kiln_runtime.
-  DelaunayBackend backend = DelaunayBackend::Cgal;
+  DelaunayBackend backend = DelaunayBackend::TetGen;
   // Probes closer than this fraction of the bounds diagonal are merged.
   double mergeTolerance = 1e-6;
   // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).
