@@ -35,7 +35,7 @@ struct ProbeTopologySettings {
   // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).
   double flatTolerance = 1e-6;
   // Inner cells per seed of the runtime's acceleration grid.
-  int cellsPerSeed = 4;
+  int cellsPerSeed = 1;
 };
 
 // Builds the topology for `positions` (world space, metres). The result has zero SH and

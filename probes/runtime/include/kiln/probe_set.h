@@ -145,8 +145,11 @@ void computeOuterCellCubics(ProbeSet& set);
 // Requires a complete, valid topology (validateProbeSet).
 void prepareProbeLookup(ProbeSet& set);
 
-// Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most 64 per axis, each
-// seed being the cell that contains the grid cell's centre. Requires a complete topology.
+// Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most kSeedGridMaxAxis
+// per axis, each seed a cell whose centroid lies in the grid cell (the one nearest its
+// centre), or for a grid cell no centroid falls in, the nearest grid cell's seed. Requires a
+// complete topology.
+inline constexpr int kSeedGridMaxAxis = 128;
 void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 
 // Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
