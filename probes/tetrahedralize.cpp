@@ -186,30 +186,31 @@ uint32_t mortonIndex(uint32_t x, uint32_t y, uint32_t z) {
 }
 
 // The cells' canonical order: along a space-filling curve (Morton's Z order, kCurveBits per
-// axis over the centroids' bounds) through their centroids, ties by probe indices. It depends on the triangulation alone (so both
-// backends give the same ProbeSet), and cells near in space are near in memory, so a walk's
-// steps, the neighbour links and the seed grid's cells stay in cache. Returns, for each
-// position of the new order, the index into `tets`.
-std::vector<int32_t> curveOrder(std::span<const glm::vec3> P,
-                                  const std::vector<glm::ivec4>& tets) {
-  const size_t n = tets.size();
-  std::vector<glm::vec3> centroid(n);
-  glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-lo);
-  for (size_t c = 0; c < n; ++c) {
-    const glm::ivec4 t = tets[c];
-    centroid[c] = 0.25f * (P[t[0]] + P[t[1]] + P[t[2]] + P[t[3]]);
-    lo = glm::min(lo, centroid[c]);
-    hi = glm::max(hi, centroid[c]);
+// axis over the probes' bounds) through their centroids, ties by probe indices. It depends on
+// the triangulation alone (so both backends give the same ProbeSet), and cells near in space
+// are near in memory, so a walk's steps, the neighbour links and the seed grid's cells stay in
+// cache. A cell's key comes from CurveKeys::of in the pass that reads the backend's cells;
+// curveOrder returns, for each position of the new order, the index into `tets`.
+struct CurveKeys {
+  glm::vec3 lo, scale;
+  CurveKeys(dvec3 lo_, dvec3 hi_) : lo(lo_) {
+    constexpr double kCells = double(1u << kCurveBits);
+    scale = glm::vec3(kCells / glm::max(hi_ - lo_, dvec3(1e-30)));
   }
-  constexpr float kCells = float(1u << kCurveBits);
-  const glm::vec3 scale = kCells / glm::max(hi - lo, glm::vec3(1e-30f));
+  uint32_t of(glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) const {
+    constexpr float kLast = float((1u << kCurveBits) - 1);
+    const glm::vec3 f =
+        glm::clamp((0.25f * (a + b + c + d) - lo) * scale, glm::vec3(0.0f), glm::vec3(kLast));
+    return mortonIndex(uint32_t(f.x), uint32_t(f.y), uint32_t(f.z));
+  }
+};
+
+std::vector<int32_t> curveOrder(const std::vector<uint32_t>& keys,
+                                const std::vector<glm::ivec4>& tets) {
+  const size_t n = tets.size();
   // key << 32 | index: sorting the words sorts by key, ties by the backend's index.
   std::vector<uint64_t> words(n), swap(n);
-  for (size_t c = 0; c < n; ++c) {
-    const glm::vec3 f = glm::clamp((centroid[c] - lo) * scale, glm::vec3(0.0f),
-                                   glm::vec3(kCells - 1.0f));
-    words[c] = (uint64_t(mortonIndex(uint32_t(f.x), uint32_t(f.y), uint32_t(f.z))) << 32) | c;
-  }
+  for (size_t c = 0; c < n; ++c) words[c] = (uint64_t(keys[c]) << 32) | c;
   // LSD radix sort on the 3 x kCurveBits key bits (stable).
   constexpr int kDigit = kCurveBits;
   for (int pass = 0; pass < 3; ++pass) {
@@ -237,8 +238,8 @@ std::vector<int32_t> curveOrder(std::span<const glm::vec3> P,
   return order;
 }
 
-Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
-                        const ProbeTopologySettings& settings) {
+Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dvec3 lo,
+                        dvec3 hi, const ProbeTopologySettings& settings) {
   const auto& P = ctx.positions;
   std::vector<dvec3> pts(reps.size());
   for (size_t i = 0; i < reps.size(); ++i) pts[i] = dvec3(P[reps[i]]);
@@ -250,8 +251,11 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
   // Each tetrahedron's probes sorted, then the last two swapped if that makes the orientation
   // positive; its backend neighbours follow their vertices to the new slots.
   std::vector<glm::ivec4> tets, backendNeighbours;
+  std::vector<uint32_t> keys;
   tets.reserve(raw->tets.size());
   backendNeighbours.reserve(raw->tets.size());
+  keys.reserve(raw->tets.size());
+  const CurveKeys curve(lo, hi);
   int flat = 0;
   for (size_t r = 0; r < raw->tets.size(); ++r) {
     const auto& t = raw->tets[r];
@@ -263,7 +267,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
         std::swap(slot[j - 1], slot[j]);
       }
     }
-    const double o = orient3d(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
+    const glm::vec3 a = P[v[0]], b = P[v[1]], c = P[v[2]], d = P[v[3]];
+    const double o = orient3d(a, b, c, d);
     if (o == 0.0) {
       ++flat;
       continue;
@@ -273,12 +278,13 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
       std::swap(slot[2], slot[3]);
     }
     tets.push_back(v);
+    keys.push_back(curve.of(a, b, c, d));
     const auto& n = raw->neighbours[r];
     backendNeighbours.push_back(glm::ivec4(n[slot[0]], n[slot[1]], n[slot[2]], n[slot[3]]));
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
   if (tets.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  const std::vector<int32_t> order = curveOrder(P, tets);
+  const std::vector<int32_t> order = curveOrder(keys, tets);
   const int32_t inner = int32_t(tets.size());
   std::vector<int32_t> newIndex(tets.size());
   for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[i])] = i;
@@ -626,7 +632,7 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
         if (!r) return Error{"buildProbeTopology: " + r.error()};
         set = std::move(r).value();
       } else {
-        Result<ProbeSet> r = build3(ctx, reps, settings);
+        Result<ProbeSet> r = build3(ctx, reps, lo, hi, settings);
         if (!r) return Error{"buildProbeTopology: " + r.error()};
         set = std::move(r).value();
       }
