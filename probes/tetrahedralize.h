@@ -29,7 +29,11 @@ namespace kiln {
 enum class DelaunayBackend { TetGen, Cgal };
 
 struct ProbeTopologySettings {
-  DelaunayBackend backend = DelaunayBackend::TetGen;
+  // CGAL by default (faster than TetGen: 100k random probes, whole build 1.14 s vs 1.22 s; the
+  // same cells in general position, and on cospherical input such as grids another valid
+  // Delaunay split). TetGen is AGPLv3 and only ever linked into the bake tools, never
+  // kiln_runtime.
+  DelaunayBackend backend = DelaunayBackend::Cgal;
   // Probes closer than this fraction of the bounds diagonal are merged.
   double mergeTolerance = 1e-6;
   // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).
