@@ -11,12 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <limits>
-
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 #include "kiln/predicates.h"
 
@@ -620,19 +615,6 @@ void prepareProbeLookup(ProbeSet& s) {
       s.neighbours.size() < size_t(s.innerCellCount)) {
     return;
   }
-  // An unhinted walk's steps land on unrelated pages of a large record array (42 MB at 100k
-  // probes): on Linux, ask for transparent huge pages before the pages are first touched, so
-  // a step costs a cache miss and not also a TLB miss (a hint; without it nothing changes).
-  s.walk.reserve(size_t(s.innerCellCount));
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  {
-    constexpr uintptr_t kHuge = uintptr_t(2) << 20;
-    const uintptr_t first = (reinterpret_cast<uintptr_t>(s.walk.data()) + kHuge - 1) & ~(kHuge - 1);
-    const uintptr_t last =
-        reinterpret_cast<uintptr_t>(s.walk.data() + s.walk.capacity()) & ~(kHuge - 1);
-    if (last > first) madvise(reinterpret_cast<void*>(first), last - first, MADV_HUGEPAGE);
-  }
-#endif
   s.walk.resize(size_t(s.innerCellCount));
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (int32_t c = 0; c < s.innerCellCount; ++c) {
