@@ -235,12 +235,12 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
   set.grid = ProbeSeedGrid{};
   if (set.dimension < 2 || set.innerCellCount <= 0) return;
   const int corners = set.dimension == 3 ? 4 : 3;
+  // The bounds of every probe (a sequential pass; a merged or dropped probe only widens them
+  // by a hair, and lookups clamp to the grid anyway).
   glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-lo);
-  for (int32_t c = 0; c < set.innerCellCount; ++c) {
-    for (int k = 0; k < corners; ++k) {
-      lo = glm::min(lo, set.positions[size_t(set.cells[size_t(c)][k])]);
-      hi = glm::max(hi, set.positions[size_t(set.cells[size_t(c)][k])]);
-    }
+  for (const glm::vec3& p : set.positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
   }
   const glm::dvec3 ext = glm::dvec3(hi) - glm::dvec3(lo);
   const double diag = glm::length(ext);
