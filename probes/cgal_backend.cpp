@@ -9,6 +9,7 @@
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_cell_base_with_info_3.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
@@ -19,7 +20,8 @@ namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Vb3 = CGAL::Triangulation_vertex_base_with_info_3<int32_t, Kernel>;
-using Tds3 = CGAL::Triangulation_data_structure_3<Vb3>;
+using Cb3 = CGAL::Triangulation_cell_base_with_info_3<int32_t, Kernel>;
+using Tds3 = CGAL::Triangulation_data_structure_3<Vb3, Cb3>;
 using Delaunay3 = CGAL::Delaunay_triangulation_3<Kernel, Tds3>;
 using Vb2 = CGAL::Triangulation_vertex_base_with_info_2<int32_t, Kernel>;
 using Tds2 = CGAL::Triangulation_data_structure_2<Vb2>;
@@ -27,7 +29,7 @@ using Delaunay2 = CGAL::Delaunay_triangulation_2<Kernel, Tds2>;
 
 }  // namespace
 
-Result<Tets> cgalDelaunay3(std::span<const glm::dvec3> points) {
+Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
   try {
     std::vector<std::pair<Kernel::Point_3, int32_t>> input;
     input.reserve(points.size());
@@ -38,13 +40,20 @@ Result<Tets> cgalDelaunay3(std::span<const glm::dvec3> points) {
     if (dt.dimension() != 3) {
       return Error{"CGAL: triangulation has dimension " + std::to_string(dt.dimension())};
     }
-    Tets tets;
-    tets.reserve(dt.number_of_finite_cells());
+    // Number the finite cells (infinite ones, beyond the hull faces, get -1), then read
+    // CGAL's adjacency: neighbor(k) is opposite vertex(k), as the caller expects.
+    int32_t count = 0;
+    for (auto c : dt.all_cell_handles()) c->info() = dt.is_infinite(c) ? -1 : count++;
+    Tetrahedralization r;
+    r.tets.reserve(size_t(count));
+    r.neighbours.reserve(size_t(count));
     for (auto c : dt.finite_cell_handles()) {
-      tets.push_back({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
-                      c->vertex(3)->info()});
+      r.tets.push_back({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
+                        c->vertex(3)->info()});
+      r.neighbours.push_back({c->neighbor(0)->info(), c->neighbor(1)->info(),
+                              c->neighbor(2)->info(), c->neighbor(3)->info()});
     }
-    return tets;
+    return r;
   } catch (const std::exception& e) {
     return Error{std::string("CGAL Delaunay_triangulation_3 failed: ") + e.what()};
   }

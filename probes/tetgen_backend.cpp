@@ -10,7 +10,7 @@
 
 namespace kiln::detail {
 
-Result<Tets> tetgenDelaunay3(std::span<const glm::dvec3> points) {
+Result<Tetrahedralization> tetgenDelaunay3(std::span<const glm::dvec3> points) {
   try {
     tetgenio in, out;
     in.firstnumber = 0;
@@ -19,21 +19,27 @@ Result<Tets> tetgenDelaunay3(std::span<const glm::dvec3> points) {
     for (size_t i = 0; i < points.size(); ++i) {
       for (int a = 0; a < 3; ++a) in.pointlist[3 * i + a] = points[i][a];
     }
-    // Q: quiet; z: number from zero. Without p there is no PLC and without q no quality
-    // refinement, so TetGen adds no Steiner points: the output vertices are the input points.
-    char switches[] = "Qz";
+    // Q: quiet; z: number from zero; n: neighbours (the i-th opposite the i-th corner, -1 on
+    // the hull). Without p there is no PLC and without q no quality refinement, so TetGen
+    // adds no Steiner points: the output vertices are the input points.
+    char switches[] = "Qzn";
     tetrahedralize(switches, &in, &out);
     if (out.numberofpoints != in.numberofpoints) {
       return Error{"TetGen: output has " + std::to_string(out.numberofpoints) +
                    " points for " + std::to_string(in.numberofpoints) + " inputs"};
     }
-    Tets tets(size_t(out.numberoftetrahedra));
+    if (out.neighborlist == nullptr) return Error{"TetGen: no neighbour list"};
+    Tetrahedralization r;
+    r.tets.resize(size_t(out.numberoftetrahedra));
+    r.neighbours.resize(r.tets.size());
     for (int t = 0; t < out.numberoftetrahedra; ++t) {
       for (int k = 0; k < 4; ++k) {
-        tets[size_t(t)][k] = out.tetrahedronlist[t * out.numberofcorners + k];
+        r.tets[size_t(t)][k] = out.tetrahedronlist[t * out.numberofcorners + k];
+        const int n = out.neighborlist[4 * t + k];
+        r.neighbours[size_t(t)][k] = n >= 0 && n < out.numberoftetrahedra ? n : -1;
       }
     }
-    return tets;
+    return r;
   } catch (int code) {
     return Error{"TetGen failed with code " + std::to_string(code)};
   } catch (const std::exception& e) {

@@ -8,7 +8,6 @@
 #include <cstdint>
 #include <cstdio>
 #include <limits>
-#include <unordered_map>
 
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
@@ -34,8 +33,11 @@ std::string fmt(double v) {
   return buf;
 }
 
-// Merges near-duplicates: returns, per input probe, its representative (an earlier probe or
-// itself), using a hash grid of cell size `tol` over the bounds.
+// Merges near-duplicates: returns, per input probe, its representative (the earliest probe
+// within `tol` that is its own representative, or itself). A hash grid of cell size 2 tol
+// holds the representatives: the ball of radius tol around a point then meets at most two
+// cells per axis, its own and the one on the nearer side, so 8 cells are searched (open
+// addressing, one chain per cell through `next`; no allocation per cell).
 struct MergeStats {
   int exact = 0, near = 0;
   int32_t exactExample = -1, nearExample = -1;
@@ -50,27 +52,36 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
     if (P.size() > 1) st.exactExample = 1;
     return rep;
   }
-  std::unordered_map<uint64_t, std::vector<int32_t>> buckets;
+  const double cell = 2.0 * tol;
+  // Cells far apart may share a key (21 bits per axis); the distance test sorts them out.
   auto key = [](int64_t x, int64_t y, int64_t z) {
-    return (uint64_t(x + 1) << 42) | (uint64_t(y + 1) << 21) | uint64_t(z + 1);
+    return ((uint64_t(x + 1) & 0x1fffff) << 42) | ((uint64_t(y + 1) & 0x1fffff) << 21) |
+           (uint64_t(z + 1) & 0x1fffff);
+  };
+  size_t capacity = 16;
+  while (capacity < 2 * P.size()) capacity *= 2;
+  constexpr uint64_t kEmpty = ~uint64_t(0);
+  std::vector<uint64_t> keys(capacity, kEmpty);
+  std::vector<int32_t> head(capacity, -1), next(P.size(), -1);
+  auto slot = [&](uint64_t k) {
+    uint64_t h = k * 0x9e3779b97f4a7c15ull;  // Fibonacci hashing, then linear probing
+    size_t i = size_t(h >> 32) & (capacity - 1);
+    while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & (capacity - 1);
+    return i;
   };
   for (size_t i = 0; i < P.size(); ++i) {
     const dvec3 p(P[i]);
-    const dvec3 g = glm::floor((p - lo) / tol);
+    const dvec3 f = (p - lo) / cell;
+    const dvec3 g = glm::floor(f);
     const int64_t gx = int64_t(g.x), gy = int64_t(g.y), gz = int64_t(g.z);
+    const int sx = f.x - g.x < 0.5 ? -1 : 1, sy = f.y - g.y < 0.5 ? -1 : 1,
+              sz = f.z - g.z < 0.5 ? -1 : 1;
     int32_t found = -1;
-    for (int dz = -1; dz <= 1 && found < 0; ++dz) {
-      for (int dy = -1; dy <= 1 && found < 0; ++dy) {
-        for (int dx = -1; dx <= 1 && found < 0; ++dx) {
-          auto it = buckets.find(key(gx + dx, gy + dy, gz + dz));
-          if (it == buckets.end()) continue;
-          for (int32_t j : it->second) {
-            if (glm::length(dvec3(P[j]) - p) <= tol) {
-              found = j;
-              break;
-            }
-          }
-        }
+    for (int c = 0; c < 8; ++c) {
+      const size_t at = slot(key(gx + (c & 1 ? sx : 0), gy + (c & 2 ? sy : 0),
+                                 gz + (c & 4 ? sz : 0)));
+      for (int32_t j = head[at]; j >= 0; j = next[size_t(j)]) {
+        if ((found < 0 || j < found) && glm::length(dvec3(P[j]) - p) <= tol) found = j;
       }
     }
     if (found >= 0) {
@@ -82,41 +93,69 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
       }
     } else {
       rep[i] = int32_t(i);
-      buckets[key(gx, gy, gz)].push_back(int32_t(i));
+      const uint64_t k = key(gx, gy, gz);
+      const size_t at = slot(k);
+      keys[at] = k;
+      next[i] = head[at];
+      head[at] = int32_t(i);
     }
   }
   return rep;
 }
 
-// Sorted key of a face / edge, for matching cells across it.
+// Sorted key of a face / edge / vertex, for matching cells across it: key[0] < key[1] <
+// key[2], unused entries -1 (at the end).
 struct FaceRef {
   std::array<int32_t, 3> key;
   int32_t cell;
   int32_t slot;
-  bool operator<(const FaceRef& o) const {
-    return key != o.key ? key < o.key : (cell != o.cell ? cell < o.cell : slot < o.slot);
-  }
 };
 
-// Links cells that share a key; returns the refs seen only once (boundary). Error on a key
-// shared by more than two cells.
-Result<std::vector<FaceRef>> linkFaces(std::vector<FaceRef> refs,
+// Links cells that share a key; returns the refs seen only once (boundary), in key order.
+// Error on a key shared by more than two cells. The refs are bucketed by key[0] (a counting
+// sort: keys are probe indices) and each bucket, a few dozen faces around one probe, is
+// sorted by the other two indices packed into one integer: no comparison sort over millions
+// of array keys (a 100k-probe set has 2.6M tetrahedron faces).
+Result<std::vector<FaceRef>> linkFaces(const std::vector<FaceRef>& refs, size_t probeCount,
                                        std::vector<glm::ivec4>& neighbours) {
-  std::sort(refs.begin(), refs.end());
-  std::vector<FaceRef> boundary;
-  for (size_t i = 0; i < refs.size();) {
-    size_t j = i;
-    while (j < refs.size() && refs[j].key == refs[i].key) ++j;
-    if (j - i == 1) {
-      boundary.push_back(refs[i]);
-    } else if (j - i == 2) {
-      neighbours[refs[i].cell][refs[i].slot] = refs[i + 1].cell;
-      neighbours[refs[i + 1].cell][refs[i + 1].slot] = refs[i].cell;
-    } else {
-      return Error{"tetrahedralization is not a manifold (a face is shared by " +
-                   std::to_string(j - i) + " cells)"};
+  struct Packed {
+    uint64_t rest;  // key[1] + 1 and key[2] + 1 (so -1 packs as 0)
+    uint32_t ref;   // index into refs
+  };
+  std::vector<uint32_t> start(probeCount + 1, 0);
+  for (const FaceRef& f : refs) ++start[size_t(f.key[0]) + 1];
+  for (size_t i = 0; i < probeCount; ++i) start[i + 1] += start[i];
+  std::vector<Packed> packed(refs.size());
+  {
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < refs.size(); ++i) {
+      const FaceRef& f = refs[i];
+      const uint64_t rest = (uint64_t(uint32_t(f.key[1] + 1)) << 32) | uint32_t(f.key[2] + 1);
+      packed[fill[size_t(f.key[0])]++] = {rest, uint32_t(i)};
     }
-    i = j;
+  }
+  std::vector<FaceRef> boundary;
+  for (size_t v = 0; v < probeCount; ++v) {
+    const auto first = packed.begin() + start[v], last = packed.begin() + start[v + 1];
+    std::sort(first, last, [](const Packed& a, const Packed& b) {
+      return a.rest != b.rest ? a.rest < b.rest : a.ref < b.ref;
+    });
+    for (auto i = first; i != last;) {
+      auto j = i;
+      while (j != last && j->rest == i->rest) ++j;
+      if (j - i == 1) {
+        boundary.push_back(refs[i->ref]);
+      } else if (j - i == 2) {
+        const FaceRef& a = refs[i->ref];
+        const FaceRef& b = refs[(i + 1)->ref];
+        neighbours[a.cell][a.slot] = b.cell;
+        neighbours[b.cell][b.slot] = a.cell;
+      } else {
+        return Error{"tetrahedralization is not a manifold (a face is shared by " +
+                     std::to_string(j - i) + " cells)"};
+      }
+      i = j;
+    }
   }
   return boundary;
 }
@@ -132,37 +171,128 @@ ProbeSet emptySet(const Context& ctx, int dimension) {
 
 // ---- dimension 3 -------------------------------------------------------------------------
 
-Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
-                        const ProbeTopologySettings& settings) {
+// The bits of x (kCurveBits of them) spread to every third bit (Morton order).
+constexpr int kCurveBits = 10;
+uint32_t spreadBits(uint32_t x) {
+  x &= 0x3ff;
+  x = (x | (x << 16)) & 0x030000ff;
+  x = (x | (x << 8)) & 0x0300f00f;
+  x = (x | (x << 4)) & 0x030c30c3;
+  x = (x | (x << 2)) & 0x09249249;
+  return x;
+}
+uint32_t mortonIndex(uint32_t x, uint32_t y, uint32_t z) {
+  return (spreadBits(x) << 2) | (spreadBits(y) << 1) | spreadBits(z);
+}
+
+// The cells' canonical order: along a space-filling curve (Morton's Z order, kCurveBits per
+// axis over the probes' bounds) through their centroids, ties by probe indices. It depends on
+// the triangulation alone (so both backends give the same ProbeSet), and cells near in space
+// are near in memory, so a walk's steps, the neighbour links and the seed grid's cells stay in
+// cache. A cell's key comes from CurveKeys::of in the pass that reads the backend's cells;
+// curveOrder returns, for each position of the new order, the index into `tets`.
+struct CurveKeys {
+  glm::vec3 lo, scale;
+  CurveKeys(dvec3 lo_, dvec3 hi_) : lo(lo_) {
+    constexpr double kCells = double(1u << kCurveBits);
+    scale = glm::vec3(kCells / glm::max(hi_ - lo_, dvec3(1e-30)));
+  }
+  uint32_t of(glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) const {
+    constexpr float kLast = float((1u << kCurveBits) - 1);
+    const glm::vec3 f =
+        glm::clamp((0.25f * (a + b + c + d) - lo) * scale, glm::vec3(0.0f), glm::vec3(kLast));
+    return mortonIndex(uint32_t(f.x), uint32_t(f.y), uint32_t(f.z));
+  }
+};
+
+std::vector<int32_t> curveOrder(const std::vector<uint32_t>& keys,
+                                const std::vector<glm::ivec4>& tets) {
+  const size_t n = tets.size();
+  // key << 32 | index: sorting the words sorts by key, ties by the backend's index.
+  std::vector<uint64_t> words(n), swap(n);
+  for (size_t c = 0; c < n; ++c) words[c] = (uint64_t(keys[c]) << 32) | c;
+  // LSD radix sort on the 3 x kCurveBits key bits (stable).
+  constexpr int kDigit = kCurveBits;
+  for (int pass = 0; pass < 3; ++pass) {
+    const int shift = 32 + pass * kDigit;
+    std::vector<uint32_t> count((1u << kDigit) + 1, 0);
+    for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
+    for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
+    for (uint64_t w : words) swap[count[(w >> shift) & ((1u << kDigit) - 1)]++] = w;
+    words.swap(swap);
+  }
+  std::vector<int32_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = int32_t(uint32_t(words[i]));
+  // Equal keys (cells sharing a curve cell) by probe indices, not by the backend's order.
+  for (size_t i = 0; i < n;) {
+    size_t j = i + 1;
+    while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
+    if (j - i > 1) {
+      std::sort(order.begin() + long(i), order.begin() + long(j), [&](int32_t a, int32_t b) {
+        return std::lexicographical_compare(&tets[a][0], &tets[a][0] + 4, &tets[b][0],
+                                            &tets[b][0] + 4);
+      });
+    }
+    i = j;
+  }
+  return order;
+}
+
+Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dvec3 lo,
+                        dvec3 hi, const ProbeTopologySettings& settings) {
   const auto& P = ctx.positions;
   std::vector<dvec3> pts(reps.size());
   for (size_t i = 0; i < reps.size(); ++i) pts[i] = dvec3(P[reps[i]]);
-  Result<detail::Tets> raw = settings.backend == DelaunayBackend::TetGen
-                                 ? detail::tetgenDelaunay3(pts)
-                                 : detail::cgalDelaunay3(pts);
+  Result<detail::Tetrahedralization> raw = settings.backend == DelaunayBackend::TetGen
+                                               ? detail::tetgenDelaunay3(pts)
+                                               : detail::cgalDelaunay3(pts);
   if (!raw) return Error{raw.error()};
-
   ProbeSet s = emptySet(ctx, 3);
-  std::vector<glm::ivec4> tets;
-  tets.reserve(raw->size());
+  // Each tetrahedron's probes sorted, then the last two swapped if that makes the orientation
+  // positive; its backend neighbours follow their vertices to the new slots.
+  std::vector<glm::ivec4> tets, backendNeighbours;
+  std::vector<uint32_t> keys;
+  tets.reserve(raw->tets.size());
+  backendNeighbours.reserve(raw->tets.size());
+  keys.reserve(raw->tets.size());
+  const CurveKeys curve(lo, hi);
   int flat = 0;
-  for (const auto& t : *raw) {
+  for (size_t r = 0; r < raw->tets.size(); ++r) {
+    const auto& t = raw->tets[r];
     glm::ivec4 v(reps[t[0]], reps[t[1]], reps[t[2]], reps[t[3]]);
-    std::sort(&v[0], &v[0] + 4);
-    const double o = orient3d(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
+    glm::ivec4 slot(0, 1, 2, 3);
+    for (int i = 1; i < 4; ++i) {  // insertion sort, carrying the slots along
+      for (int j = i; j > 0 && v[j - 1] > v[j]; --j) {
+        std::swap(v[j - 1], v[j]);
+        std::swap(slot[j - 1], slot[j]);
+      }
+    }
+    const glm::vec3 a = P[v[0]], b = P[v[1]], c = P[v[2]], d = P[v[3]];
+    const double o = orient3d(a, b, c, d);
     if (o == 0.0) {
       ++flat;
       continue;
     }
-    if (o < 0.0) std::swap(v[2], v[3]);  // an odd permutation makes it positive
+    if (o < 0.0) {  // an odd permutation makes it positive
+      std::swap(v[2], v[3]);
+      std::swap(slot[2], slot[3]);
+    }
     tets.push_back(v);
+    keys.push_back(curve.of(a, b, c, d));
+    const auto& n = raw->neighbours[r];
+    backendNeighbours.push_back(glm::ivec4(n[slot[0]], n[slot[1]], n[slot[2]], n[slot[3]]));
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
   if (tets.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  std::sort(tets.begin(), tets.end(), [](const glm::ivec4& a, const glm::ivec4& b) {
-    return std::lexicographical_compare(&a[0], &a[0] + 4, &b[0], &b[0] + 4);
-  });
+  const std::vector<int32_t> order = curveOrder(keys, tets);
   const int32_t inner = int32_t(tets.size());
+  std::vector<int32_t> newIndex(tets.size());
+  for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[i])] = i;
+  {
+    std::vector<glm::ivec4> sorted(tets.size());
+    for (int32_t i = 0; i < inner; ++i) sorted[size_t(i)] = tets[size_t(order[i])];
+    tets.swap(sorted);
+  }
 
   std::vector<int32_t> used(P.size(), 0);
   for (const auto& t : tets) {
@@ -174,22 +304,40 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
     ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
   }
 
-  // Faces opposite each vertex; faces seen once are on the hull.
-  std::vector<glm::ivec4> tetNeighbours(tets.size(), glm::ivec4(-1));
-  std::vector<FaceRef> refs;
-  refs.reserve(tets.size() * 4);
-  for (int32_t c = 0; c < inner; ++c) {
-    for (int k = 0; k < 4; ++k) {
-      std::array<int32_t, 3> f{};
-      for (int j = 0, n = 0; j < 4; ++j) {
-        if (j != k) f[n++] = tets[c][j];
-      }
-      std::sort(f.begin(), f.end());
-      refs.push_back({f, c, k});
+  // Neighbours: the backend's, renumbered, when every tetrahedron was kept (dropping a flat
+  // one leaves its neighbours pointing at nothing: then faces are matched instead). Faces
+  // with no tetrahedron beyond are on the hull.
+  auto face = [&](int32_t c, int k) {
+    std::array<int32_t, 3> f{};
+    for (int j = 0, n = 0; j < 4; ++j) {
+      if (j != k) f[n++] = tets[c][j];
     }
+    std::sort(f.begin(), f.end());
+    return FaceRef{f, c, k};
+  };
+  std::vector<glm::ivec4> tetNeighbours(tets.size(), glm::ivec4(-1));
+  std::vector<FaceRef> hull;
+  if (flat == 0) {
+    for (int32_t c = 0; c < inner; ++c) {
+      const glm::ivec4 n = backendNeighbours[size_t(order[c])];
+      for (int k = 0; k < 4; ++k) {
+        if (n[k] >= 0) {
+          tetNeighbours[c][k] = newIndex[size_t(n[k])];
+        } else {
+          hull.push_back(face(c, k));
+        }
+      }
+    }
+  } else {
+    std::vector<FaceRef> refs;
+    refs.reserve(tets.size() * 4);
+    for (int32_t c = 0; c < inner; ++c) {
+      for (int k = 0; k < 4; ++k) refs.push_back(face(c, k));
+    }
+    Result<std::vector<FaceRef>> open = linkFaces(refs, P.size(), tetNeighbours);
+    if (!open) return Error{open.error()};
+    hull = std::move(open).value();
   }
-  Result<std::vector<FaceRef>> hull = linkFaces(std::move(refs), tetNeighbours);
-  if (!hull) return Error{hull.error()};
 
   // Outer cells: hull triangles wound outwards, smallest index first, sorted.
   struct Outer {
@@ -197,7 +345,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
     int32_t tet, slot;
   };
   std::vector<Outer> outers;
-  for (const FaceRef& f : *hull) {
+  for (const FaceRef& f : hull) {
     const glm::ivec4 t = tets[f.cell];
     std::array<int32_t, 3> v = f.key;
     if (orient3d(P[v[0]], P[v[1]], P[v[2]], P[t[f.slot]]) > 0.0) std::swap(v[1], v[2]);
@@ -208,8 +356,10 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
             [](const Outer& a, const Outer& b) { return a.v < b.v; });
 
   s.innerCellCount = inner;
-  s.cells = tets;
-  s.neighbours = tetNeighbours;
+  s.cells = std::move(tets);
+  s.neighbours = std::move(tetNeighbours);
+  s.cells.reserve(s.cells.size() + outers.size());
+  s.neighbours.reserve(s.cells.size() + outers.size());
   std::vector<FaceRef> edges;
   for (size_t i = 0; i < outers.size(); ++i) {
     const int32_t c = inner + int32_t(i);
@@ -223,7 +373,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps,
       edges.push_back({{a, b, -1}, c, k});
     }
   }
-  Result<std::vector<FaceRef>> open = linkFaces(std::move(edges), s.neighbours);
+  Result<std::vector<FaceRef>> open = linkFaces(edges, P.size(), s.neighbours);
   if (!open) return Error{open.error()};
   if (!open->empty()) return Error{"convex hull is not closed"};
 
@@ -336,7 +486,7 @@ Result<ProbeSet> build2(const Context& ctx, const std::vector<int32_t>& reps, dv
       refs.push_back({{a, b, -1}, c, k});
     }
   }
-  Result<std::vector<FaceRef>> hull = linkFaces(std::move(refs), nb);
+  Result<std::vector<FaceRef>> hull = linkFaces(refs, P.size(), nb);
   if (!hull) return Error{hull.error()};
   std::vector<FaceRef> edges = *hull;  // key = sorted hull edge
   std::sort(edges.begin(), edges.end(),
@@ -354,7 +504,7 @@ Result<ProbeSet> build2(const Context& ctx, const std::vector<int32_t>& reps, dv
     ends.push_back({{edges[i].key[1], -1, -1}, c, 0});
     ends.push_back({{edges[i].key[0], -1, -1}, c, 1});
   }
-  Result<std::vector<FaceRef>> open = linkFaces(std::move(ends), s.neighbours);
+  Result<std::vector<FaceRef>> open = linkFaces(ends, P.size(), s.neighbours);
   if (!open) return Error{open.error()};
   s.outerCells.resize(edges.size());
   for (size_t i = 0; i < edges.size(); ++i) {
@@ -482,7 +632,7 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
         if (!r) return Error{"buildProbeTopology: " + r.error()};
         set = std::move(r).value();
       } else {
-        Result<ProbeSet> r = build3(ctx, reps, settings);
+        Result<ProbeSet> r = build3(ctx, reps, lo, hi, settings);
         if (!r) return Error{"buildProbeTopology: " + r.error()};
         set = std::move(r).value();
       }
@@ -491,6 +641,7 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.outerCells.size() != set.cells.size() - size_t(set.innerCellCount)) {
     set.outerCells.resize(set.cells.size() - size_t(set.innerCellCount));
   }
+  prepareProbeLookup(set);  // the seed grid's walks use it too
   buildProbeSeedGrid(set, settings.cellsPerSeed);
   Status st = validateProbeSet(set, "buildProbeTopology");
   if (!st) return Error{st.error()};

@@ -327,6 +327,90 @@ TEST(ProbeLookup, ManyThreadsGetTheSameAnswers) {
   for (int m : mismatches) EXPECT_EQ(m, 0);
 }
 
+// The fast walk (float barycentrics, exact predicates near faces) against the exact walk
+// from the same start, on 1M points inside and outside the hull: the same cell every time,
+// and weights that differ by no more than the float error bound of the fast path (8 u S_k,
+// S_k = sum_j |rows[k][j]| |p_j - origin_j|, with l_0 carrying the sum of the others'
+// bounds; see probe_runtime.cpp). The queries mix jumps (no hint), small moves (hinted),
+// probe positions exactly (three coordinates exactly 0, computed with rounding: only the
+// exact predicates can decide) and float midpoints of a cell's edges (within rounding of
+// two faces). Two sets: random probes in a cube, and a rotated grid (cospherical).
+void expectFastMatchesExact(const ProbeSet& s, int count, uint32_t seed) {
+  ASSERT_EQ(s.walk.size(), size_t(s.innerCellCount));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.6f, 1.6f);
+  std::normal_distribution<float> g(0.0f, 0.02f);
+  std::uniform_int_distribution<int32_t> probe(0, s.probeCount() - 1);
+  constexpr double kU = 5.9604645e-8;
+  glm::vec3 p(0.0f);
+  int32_t hint = -1;
+  int outside = 0, mismatches = 0;
+  double worstExcess = 0.0;
+  for (int i = 0; i < count; ++i) {
+    switch (i % 16) {
+      case 0:
+        p = glm::vec3(u(rng), u(rng), u(rng));
+        hint = -1;
+        break;
+      case 5:
+        p = s.positions[size_t(probe(rng))];
+        break;
+      case 10:
+        if (hint >= 0 && hint < s.innerCellCount) {
+          const glm::ivec4 t = s.cells[size_t(hint)];
+          p = 0.5f * (s.positions[size_t(t[i % 4])] + s.positions[size_t(t[(i / 16) % 4])]);
+        }
+        break;
+      default:
+        p += glm::vec3(g(rng), g(rng), g(rng));
+    }
+    const ProbeLocation fast = locateProbe(s, p, hint);
+    const ProbeLocation exact = locateProbeExact(s, p, hint);
+    if (fast.cell != exact.cell) {
+      if (++mismatches <= 5) {
+        ADD_FAILURE() << "query " << i << " (" << p.x << ", " << p.y << ", " << p.z
+                      << "): fast cell " << fast.cell << ", exact cell " << exact.cell;
+      }
+      continue;
+    }
+    hint = fast.cell;
+    outside += fast.cell >= s.innerCellCount;
+    ASSERT_EQ(fast.probes, exact.probes);
+    double bound[4] = {0, 0, 0, 0};
+    if (fast.cell < s.innerCellCount) {
+      const ProbeWalkCell& w = s.walk[size_t(fast.cell)];
+      const glm::dvec3 q = glm::abs(glm::dvec3(p) - glm::dvec3(w.origin));
+      for (int k = 0; k < 3; ++k) {
+        const double sk = glm::dot(glm::abs(glm::dvec3(w.rows[size_t(k)])), q);
+        bound[k + 1] = 8.0 * kU * sk + 4.0 * kU;
+        bound[0] += bound[k + 1];
+      }
+      bound[0] += 8.0 * kU;
+    }
+    for (int k = 0; k < 4; ++k) {
+      // Both normalise by their sum (1 within a few u) and round to float.
+      const double tolerance = bound[k] + 4.0 * kU;
+      const double d = std::fabs(double(fast.weights[k]) - double(exact.weights[k]));
+      worstExcess = std::max(worstExcess, d / tolerance);
+    }
+  }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_LE(worstExcess, 1.0) << "largest weight difference over its float error bound";
+  EXPECT_GT(outside, count / 20) << "the queries reach outer cells too";
+}
+
+TEST(ProbeLookup, FastWalkFindsTheExactWalksCellOnAMillionPoints) {
+  expectFastMatchesExact(build(cubeProbes(2000, 30), DelaunayBackend::Cgal), 600000, 31);
+  const glm::mat3 rotation = glm::mat3(glm::normalize(glm::vec3(1, 2, 2)),
+                                       glm::normalize(glm::vec3(-2, 2, -1)),
+                                       glm::normalize(glm::vec3(2, 1, -2)));
+  std::vector<glm::vec3> grid;
+  for (int z = 0; z < 9; ++z)
+    for (int y = 0; y < 9; ++y)
+      for (int x = 0; x < 9; ++x) grid.push_back(rotation * (glm::vec3(x, y, z) * 0.25f - 1.0f));
+  expectFastMatchesExact(build(grid, DelaunayBackend::Cgal), 400000, 32);
+}
+
 TEST(ProbeLookup, IrradianceOfAConstantEnvironmentIsPiTimesRadiance) {
   // Constant radiance L: c0 = L * sqrt(4 pi) / ... projection gives c0 = L * 4 pi * Y00.
   ShL2Rgb sh;

@@ -247,14 +247,16 @@ const std::vector<vec3>& probePositions(const WallScene& w, Layout layout) {
 
 // Probe bakes: the default integrator (16 bounces) and visibility maps (the default 24 x 24),
 // 1024 rays unless told.
-const ProbeSet& bakedLayout(const WallScene& w, Layout layout, uint32_t rays = 1024) {
-  static std::map<std::tuple<std::string, Layout, uint32_t>, ProbeSet> cache;
-  const auto key = std::make_tuple(std::string(w.file), layout, rays);
+const ProbeSet& bakedLayout(const WallScene& w, Layout layout, uint32_t rays = 1024,
+                            DelaunayBackend backend = ProbeTopologySettings{}.backend) {
+  static std::map<std::tuple<std::string, Layout, uint32_t, DelaunayBackend>, ProbeSet> cache;
+  const auto key = std::make_tuple(std::string(w.file), layout, rays, backend);
   auto it = cache.find(key);
   if (it == cache.end()) {
     const Loaded& l = loaded(w);
     ProbeBakeSettings bake;
     bake.rays = rays;
+    bake.topology.backend = backend;
     Result<ProbeSet> set = bakeProbes(l.scene, *l.tracer, probePositions(w, layout), bake);
     EXPECT_TRUE(bool(set)) << set.error();
     it = cache.emplace(key, set ? std::move(set).value() : ProbeSet{}).first;
@@ -672,6 +674,8 @@ struct LineSweep {
   float visibility = 0.0f;  // largest SlopeBound::visibility
   size_t outer = 0;         // samples outside the hull (the bound assumes inner cells)
   size_t overBound = 0;     // steps whose jump exceeds the bound
+  size_t samples = 0;       // samples inside the hull
+  size_t blanket = 0;       // of those, where 2 step L >= 1 (the bound allows any jump)
 };
 
 LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
@@ -702,6 +706,8 @@ LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
       // Float rounding of the blend: a few ulps of the largest probe value.
       s.overBound += jump > allowed + 1e-6f * (1.0f + bound.range) ? 1 : 0;
     }
+    ++s.samples;
+    s.blanket += 2.0f * step * bound.slope >= 1.0f ? 1 : 0;
     s.maxSlope = std::max(s.maxSlope, bound.slope);
     s.ramp = std::max(s.ramp, bound.ramp);
     s.visibility = std::max(s.visibility, bound.visibility);
@@ -717,30 +723,31 @@ LineSweep sweepLine(const ProbeSet& set, vec3 a, vec3 b, float step) {
 // behind it, and 1.5 m up), where room A's probes are hidden; one from room B through the
 // doorway into room A, where they come into view; and two in room B near the doorway's
 // edges as room A's probes see them (0.3 m from the wall 0.2 m above the doorway's top, along
-// z past its side; and up its middle past the lintel). On the first of those, points pass out
-// of room-A probes' reach, and the reach ramps' part of L is most of it (measured over six
-// bakes: up to 16-44 per m, with L up to 28-57, on two_rooms; 51-135 of 88-177 on
-// two_rooms_thin).
+// z past its side; and up its middle past the lintel). On those, points pass out of room-A
+// probes' reach (with TetGen's cells on the first, with CGAL's on the second: which probes
+// the line's cells hold depends on how the backend splits the grid's cospherical cubes, both
+// valid Delaunay tetrahedralizations). Each backend's set is swept: the continuity bound holds
+// for any valid Delaunay, not one backend's tie-breaking.
 // Measured over six bakes: every jump within 0.23 of its bound; the 0.25 mm / 1 mm ratio of the
 // largest jumps 0.250-0.281 (above 1/4 where L varies within a millimetre, on the ramps).
 TEST(ProbeScenesWall, BlendIsContinuousWithABoundedSlopeAcrossTheWallsCells) {
+  for (const DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal})
   for (const WallScene& w : {kThickWall, kThinWall}) {
-    const ProbeSet& set = bakedLayout(w, Layout::Grid);
+    const char* backendName = backend == DelaunayBackend::TetGen ? "tetgen" : "cgal";
+    const ProbeSet& set = bakedLayout(w, Layout::Grid, 1024, backend);
     ASSERT_FALSE(set.visibility.empty()) << w.file;
     struct Line {
       vec3 a, b;
       const char* name;
-      bool edge;  // crosses the doorway's edge as room A's probes see it
     };
     const Line lines[] = {
-        {vec3(w.faceB + 0.2f, 0.6f, 0.6f), vec3(w.faceB + 0.2f, 0.6f, 2.4f), "behind the patch",
-         false},
-        {vec3(w.faceB + 0.2f, 1.5f, 0.6f), vec3(w.faceB + 0.2f, 1.5f, 2.4f), "1.5 m up", false},
-        {vec3(w.faceB + 0.6f, 1.0f, 3.3f), vec3(w.faceA - 0.6f, 1.0f, 3.3f), "doorway", false},
-        {vec3(w.faceB + 0.3f, 2.3f, 2.0f), vec3(w.faceB + 0.3f, 2.3f, 3.45f), "over the doorway",
-         true},
-        {vec3(w.faceB + 0.2f, 0.55f, 3.3f), vec3(w.faceB + 0.2f, 2.45f, 3.3f), "up past the lintel",
-         false}};
+        {vec3(w.faceB + 0.2f, 0.6f, 0.6f), vec3(w.faceB + 0.2f, 0.6f, 2.4f), "behind the patch"},
+        {vec3(w.faceB + 0.2f, 1.5f, 0.6f), vec3(w.faceB + 0.2f, 1.5f, 2.4f), "1.5 m up"},
+        {vec3(w.faceB + 0.6f, 1.0f, 3.3f), vec3(w.faceA - 0.6f, 1.0f, 3.3f), "doorway"},
+        {vec3(w.faceB + 0.3f, 2.3f, 2.0f), vec3(w.faceB + 0.3f, 2.3f, 3.45f), "over the doorway"},
+        {vec3(w.faceB + 0.2f, 0.55f, 3.3f), vec3(w.faceB + 0.2f, 2.45f, 3.3f),
+         "up past the lintel"}};
+    float rampOnAnyLine = 0.0f;
     for (const Line& line : lines) {
       for (float t = 0.0f; t <= 1.0f; t += 0.05f)
         ASSERT_TRUE(isValidProbePoint(loaded(w).scene, *loaded(w).tracer,
@@ -748,25 +755,34 @@ TEST(ProbeScenesWall, BlendIsContinuousWithABoundedSlopeAcrossTheWallsCells) {
             << w.file << ", " << line.name << " at " << t;
       const LineSweep mm = sweepLine(set, line.a, line.b, 1e-3f);
       const LineSweep quarter = sweepLine(set, line.a, line.b, 0.25e-3f);
+      const double blanketShare = double(mm.blanket) / double(std::max<size_t>(mm.samples, 1));
       std::printf(
-          "%s, %s: largest jump %.3g lux per 1 mm, %.3g per 0.25 mm (ratio %.3f); jump / bound "
-          "at most %.3f (0.25 mm: %.3f); L up to %.1f per m, reach ramps' part up to %.1f\n",
-          w.file, line.name, mm.maxJump, quarter.maxJump, quarter.maxJump / mm.maxJump,
-          mm.worstShare, quarter.worstShare, mm.maxSlope, mm.ramp);
-      EXPECT_EQ(mm.outer + quarter.outer, 0u) << w.file << ", " << line.name;
+          "%s, %s, %s: largest jump %.3g lux per 1 mm, %.3g per 0.25 mm (ratio %.3f); jump / "
+          "bound at most %.3f (0.25 mm: %.3f); L up to %.1f per m, reach ramps' part up to "
+          "%.1f; 2 x 1 mm x L >= 1 on %.4f of the line\n",
+          backendName, w.file, line.name, mm.maxJump, quarter.maxJump,
+          quarter.maxJump / mm.maxJump, mm.worstShare, quarter.worstShare, mm.maxSlope, mm.ramp,
+          blanketShare);
+      const std::string what = std::string(backendName) + ", " + w.file + ", " + line.name;
+      EXPECT_EQ(mm.outer + quarter.outer, 0u) << what;
       // The bound's own v is the runtime's (up to float rounding through the ramp's 1 / w).
-      EXPECT_LE(std::max(mm.visibility, quarter.visibility), 1e-3f) << w.file << ", " << line.name;
-      EXPECT_EQ(mm.overBound, 0u) << w.file << ", " << line.name;
-      EXPECT_EQ(quarter.overBound, 0u) << w.file << ", " << line.name;
-      EXPECT_GT(mm.maxJump, 0.0f) << w.file << ", " << line.name;
-      EXPECT_LT(quarter.maxJump, 0.35f * mm.maxJump) << w.file << ", " << line.name;
-      // The bound is no blanket: a jump of the probes' whole range would break it anywhere
-      // on the line (measured: 2 x 1 mm x L <= 0.36).
-      EXPECT_LT(2.0f * 1e-3f * mm.maxSlope, 1.0f) << w.file << ", " << line.name;
-      if (line.edge) {
-        EXPECT_GT(mm.ramp, 0.0f) << w.file << ", " << line.name << ": no reach ramp on the line";
-      }
+      EXPECT_LE(std::max(mm.visibility, quarter.visibility), 1e-3f) << what;
+      EXPECT_EQ(mm.overBound, 0u) << what;
+      EXPECT_EQ(quarter.overBound, 0u) << what;
+      EXPECT_GT(mm.maxJump, 0.0f) << what;
+      EXPECT_LT(quarter.maxJump, 0.35f * mm.maxJump) << what;
+      // The bound is no blanket: a jump of the probes' whole range would break it on all but
+      // a sliver of the line. Not "anywhere": L peaks where a cell's probe sees a depth edge
+      // (the lintel) with a small spread, and whether the line's cells hold such a probe
+      // depends on how the backend splits the grid's cospherical cubes (TetGen: L <= 390 per
+      // m, 2 x 1 mm x L < 1 everywhere; CGAL: L up to 1460 per m, 2 x 1 mm x L >= 1 on 0.0026 of
+      // one line, the thin wall's lintel).
+      EXPECT_LT(blanketShare, 0.01) << what;
+      rampOnAnyLine = std::max(rampOnAnyLine, mm.ramp);
     }
+    // Near the doorway's edges points pass out of room-A probes' reach: some line crosses a
+    // reach ramp (which line depends on the split of the grid's cubes as well).
+    EXPECT_GT(rampOnAnyLine, 0.0f) << backendName << ", " << w.file << ": no reach ramp";
   }
 }
 

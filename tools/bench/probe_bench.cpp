@@ -272,6 +272,20 @@ void BM_Tetrahedralize(benchmark::State& state) {
   state.SetItemsProcessed(int64_t(state.iterations()) * state.range(1));
 }
 
+// The bare Delaunay the topology build is measured against: CGAL's range insert of the same
+// points (converted from the floats), nothing else.
+void BM_CgalDelaunay(benchmark::State& state) {
+  const std::vector<glm::vec3> positions = randomPoints(size_t(state.range(0)), 3);
+  for (auto _ : state) {
+    std::vector<Kernel::Point_3> pts;
+    pts.reserve(positions.size());
+    for (const auto& p : positions) pts.emplace_back(p.x, p.y, p.z);
+    CgalDelaunay dt(pts.begin(), pts.end());
+    benchmark::DoNotOptimize(dt.number_of_cells());
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * state.range(0));
+}
+
 BENCHMARK(BM_LocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateUnhinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_CgalLocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
@@ -285,6 +299,9 @@ BENCHMARK(BM_BlendHinted)
     ->Args({10000, 1})
     ->Args({100000, 0})
     ->Args({100000, 1});
+BENCHMARK(BM_CgalDelaunay)->ArgName("probes")->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_CgalDelaunay)->ArgName("probes")->Arg(100000)->Iterations(1)->Unit(
+    benchmark::kMillisecond);
 BENCHMARK(BM_Tetrahedralize)
     ->ArgNames({"backend", "probes"})
     ->Args({0, 1000})

@@ -1,6 +1,7 @@
 // predicates.cpp: filtered exact orient3d (Shewchuk 1997, "Adaptive Precision Floating-Point
 // Arithmetic and Fast Robust Geometric Predicates"): a double evaluation with an error bound,
 // then an exact sum of floating-point expansion terms when the bound does not settle the sign.
+// The filter is inline in predicates.h; this file holds the exact path.
 #include "kiln/predicates.h"
 
 #include <cmath>
@@ -73,29 +74,6 @@ double orient3dExact(glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) noexcep
   addDet3(x, a, b, d, false);
   addDet3(x, a, b, c, true);
   return x.estimate();
-}
-
-double orient3d(glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) noexcept {
-  const double bax = double(b.x) - a.x, bay = double(b.y) - a.y, baz = double(b.z) - a.z;
-  const double cax = double(c.x) - a.x, cay = double(c.y) - a.y, caz = double(c.z) - a.z;
-  const double dax = double(d.x) - a.x, day = double(d.y) - a.y, daz = double(d.z) - a.z;
-  const double m0 = cay * daz - caz * day;
-  const double m1 = caz * dax - cax * daz;
-  const double m2 = cax * day - cay * dax;
-  const double det = bax * m0 + bay * m1 + baz * m2;
-  const double permanent = std::fabs(bax) * (std::fabs(cay * daz) + std::fabs(caz * day)) +
-                           std::fabs(bay) * (std::fabs(caz * dax) + std::fabs(cax * daz)) +
-                           std::fabs(baz) * (std::fabs(cax * day) + std::fabs(cay * dax));
-  // Shewchuk's bound for exact differences is about 7.8e-16 x permanent; float differences
-  // in double may round once more each (relative 1.1e-16), so 1e-14 is a safe margin.
-  const double bound = 1e-14 * permanent;
-  if (det > bound || -det > bound) return det;
-  if (!std::isfinite(det)) return det;
-  const double exact = orient3dExact(a, b, c, d);
-  if (exact == 0.0) return 0.0;
-  // Keep the double magnitude when it agrees in sign (it is the better estimate).
-  if ((exact > 0.0) == (det > 0.0) && det != 0.0) return det;
-  return exact;
 }
 
 }  // namespace kiln

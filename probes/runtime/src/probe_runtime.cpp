@@ -289,18 +289,93 @@ void scan3(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc) {
   }
 }
 
-void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc) {
+// ---- dimension 3: the float fast path ----------------------------------------------------
+//
+// A step computes p's barycentric coordinates l_k in float from the cell's record
+// (ProbeWalkCell) and trusts a sign only beyond an error bound e_k; when the bound leaves the
+// decision open (p within about 1e-6 relative of a face, or a sliver) the step is made with
+// the exact predicates instead (evalTet). Derivation of e_k (u = 2^-24, float rounding):
+// prepareProbeLookup makes each entry of rows[] accurate to 1.07 u relative (walkRows); the
+// difference q = p - origin rounds once (u relative per component); the 3-term dot product
+// rounds within 3 u x sum_j |r_kj q_j|, with or without FMA. So for k = 1, 2, 3
+//   |l_k - lambda_k| <= 5.1 u S_k,   S_k = sum_j |r_kj| |q_j|,
+// and l_0 = ((1 - l_1) - l_2) - l_3 adds its three roundings, 3 u (1 + sum |l_k|), to the
+// sum of the others' errors. kFastError = 8 u covers 5.1 u with the rounding of S itself;
+// kTiny covers products that underflow. A step then decides:
+//  - inside: every l_k > e_k, so every exact coordinate is positive: the exact walk stops
+//    here too;
+//  - exit: the smallest l_k is below -e_k and below every other l_j by more than both error
+//    bounds, so it is the exact walk's most negative coordinate and the same face is left
+//    (the exact walk ranks its double determinants, accurate to about 1e-15 of their
+//    permanent: far inside that margin);
+//  - otherwise (and for NaN): evalTet, the exact walk's own step.
+// The fast walk thus visits the exact walk's cells and stops in the exact walk's cell; its
+// weights are the float coordinates (within 8 u S_k of the exact ones).
+constexpr float kUnitRoundoff = 5.9604645e-8f;  // 2^-24
+constexpr float kFastError = 8.0f * kUnitRoundoff;
+constexpr float kRoundError = 4.0f * kUnitRoundoff;  // l_0's 3 roundings, with margin
+constexpr float kTiny = 1.2e-38f;
+
+// Returns -1 (inside, l = the coordinates), 0..3 (the face to leave by) or -2 (undecided).
+inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
+  const float qx = p.x - w.origin.x, qy = p.y - w.origin.y, qz = p.z - w.origin.z;
+  const float ax = std::fabs(qx), ay = std::fabs(qy), az = std::fabs(qz);
+  float e[4];
+  for (int k = 0; k < 3; ++k) {
+    const glm::vec3 r = w.rows[size_t(k)];
+    l[k + 1] = r.x * qx + r.y * qy + r.z * qz;
+    e[k + 1] = kFastError * (std::fabs(r.x) * ax + std::fabs(r.y) * ay + std::fabs(r.z) * az) +
+               kTiny;
+  }
+  l[0] = ((1.0f - l[1]) - l[2]) - l[3];
+  e[0] = (e[1] + e[2] + e[3]) +
+         kRoundError * (1.0f + std::fabs(l[1]) + std::fabs(l[2]) + std::fabs(l[3]));
+  if (l[0] > e[0] && l[1] > e[1] && l[2] > e[2] && l[3] > e[3]) return -1;
+  int k = 0;
+  for (int j = 1; j < 4; ++j) {
+    if (l[j] < l[k]) k = j;
+  }
+  if (!(l[k] < -e[k])) return -2;
+  const float upper = l[k] + e[k];
+  for (int j = 0; j < 4; ++j) {
+    if (j != k && !(l[j] - e[j] > upper)) return -2;
+  }
+  return k;
+}
+
+// The walk: with `walk` (the set's records) each step tries fastStep first; without, every
+// step is exact (locateProbeExact).
+void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
+             const ProbeWalkCell* walk) {
   for (int step = 0; step < kMaxWalkSteps; ++step) {
     loc.steps = uint16_t(std::min(step + 1, 65535));
     int32_t next;
     if (cell < s.innerCellCount) {
-      double b[4];
-      const int exit = evalTet(s, cell, p, b);
-      if (exit < 0) {
-        setTet(s, loc, cell, b);
-        return;
+      int exit = -2;
+      if (walk) {
+        float l[4];
+        exit = fastStep(walk[cell], p, l);
+        if (exit == -1) {
+          // finish()'s work without its checks: inside, every l_k is finite and positive.
+          const glm::ivec4 t = s.cells[size_t(cell)];
+          const double b0 = l[0], b1 = l[1], b2 = l[2], b3 = l[3];
+          const double inverse = 1.0 / (((b0 + b1) + b2) + b3);
+          loc.cell = cell;
+          loc.probes = {t[0], t[1], t[2], t[3]};
+          loc.barycentric = {float(b0 * inverse), float(b1 * inverse), float(b2 * inverse),
+                             float(b3 * inverse)};
+          return;
+        }
       }
-      next = s.neighbours[cell][exit];
+      if (exit == -2) {
+        double b[4];
+        exit = evalTet(s, cell, p, b);
+        if (exit < 0) {
+          setTet(s, loc, cell, b);
+          return;
+        }
+      }
+      next = walk ? walk[cell].next[exit] : s.neighbours[cell][exit];
     } else {
       const OuterEval e = evalOuter(s, cell, p);
       if (e.exit < 0) {
@@ -444,10 +519,10 @@ void locate1(const ProbeSet& s, glm::vec3 pf, ProbeLocation& loc) {
   loc.steps = 1;
 }
 
-}  // namespace
-
-ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
-                          const ProbeBlendSettings& blend) noexcept {
+// The cell around p from `hint` (the exact walk, or the fast one when `fast` and the set has
+// its walk records) and the weights.
+ProbeLocation locate(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                     const ProbeBlendSettings& blend, bool fast) noexcept {
   ProbeLocation loc;
   if (s.cells.empty() || s.innerCellCount <= 0) return loc;
   switch (s.dimension) {
@@ -455,10 +530,11 @@ ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
     case 2: {
       if (hint < 0 || hint >= s.cellCount()) hint = seedCell(s, p);
       if (hint < 0 || hint >= s.cellCount()) hint = 0;
-      if (s.dimension == 3) {
-        locate3(s, p, hint, loc);
-      } else {
+      if (s.dimension == 2) {
         locate2(s, p, hint, loc);
+      } else {
+        const bool useWalk = fast && s.walk.size() == size_t(s.innerCellCount);
+        locate3(s, p, hint, loc, useWalk ? s.walk.data() : nullptr);
       }
       break;
     }
@@ -474,6 +550,92 @@ ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
   }
   weightByVisibility(s, p, loc, blend);
   return loc;
+}
+
+// A cell's walk rows; false when the float map cannot be made accurate to 1.07 u per entry.
+// The edges are float differences, exact in double unless the coordinates' exponents differ
+// by more than 29 (checked); each row is a cross product of two edges over the determinant:
+// the cross products accurate to 2^-49 relative, the determinant to u / 16 (checked with its
+// error bound: a sliver fails), then one rounding to float (u).
+bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
+  dvec3 e[3];
+  for (int j = 0; j < 3; ++j) {
+    for (int a = 0; a < 3; ++a) {
+      const double x = double(v[j + 1][a]), y = double(v[0][a]);
+      const double d = x - y;
+      // Two-sum error of x - y: zero iff the difference is exact.
+      const double bv = d - x, av = d - bv;
+      if ((x - av) + (-y - bv) != 0.0) return false;
+      e[j][a] = d;
+    }
+  }
+  // a b - c d and a bound on its error: plain double (within 2^-53 (|a b| + |c d|)) unless it
+  // cancels below 1/8 of that, where Kahan's FMA algorithm (1.5 ulp) takes over. Either way
+  // each component is accurate to 2^-49 relative.
+  struct Value {
+    double v, error;
+  };
+  auto diff = [](double a, double b, double c, double d) {
+    const double ab = a * b, cd = c * d, plain = ab - cd;
+    const double size = std::fabs(ab) + std::fabs(cd);
+    if (std::fabs(plain) >= 0.125 * size) return Value{plain, 0x1p-52 * size};
+    const double kahan = std::fma(a, b, -cd) + std::fma(-c, d, cd);
+    return Value{kahan, 0x1p-51 * std::fabs(kahan)};
+  };
+  dvec3 c[3], error[3];
+  for (int k = 0; k < 3; ++k) {
+    const dvec3 a = e[(k + 1) % 3], b = e[(k + 2) % 3];
+    const Value x = diff(a.y, b.z, a.z, b.y), y = diff(a.z, b.x, a.x, b.z),
+                z = diff(a.x, b.y, a.y, b.x);
+    c[k] = dvec3(x.v, y.v, z.v);
+    error[k] = dvec3(x.error, y.error, z.error);
+  }
+  // det = e_0 . c_0 within the components' errors plus the dot product's rounding (3 ulp of
+  // sum |e_0j c_0j|); the rows need it to u / 16 = 2^-28 relative, else the cell is a sliver
+  // left to the exact path.
+  const double det = glm::dot(e[0], c[0]);
+  const double detError = glm::dot(glm::abs(e[0]), error[0]) +
+                          0x1p-51 * glm::dot(glm::abs(e[0]), glm::abs(c[0]));
+  if (!(det > 0.0) || !(detError <= 0x1p-28 * det)) return false;
+  for (int k = 0; k < 3; ++k) {
+    for (int a = 0; a < 3; ++a) {
+      const float f = float(c[k][a] / det);
+      if (f != 0.0f && !std::isnormal(f)) return false;
+      rows[size_t(k)][a] = f;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+void prepareProbeLookup(ProbeSet& s) {
+  s.walk.clear();
+  if (s.dimension != 3 || s.innerCellCount <= 0 || s.cells.size() < size_t(s.innerCellCount) ||
+      s.neighbours.size() < size_t(s.innerCellCount)) {
+    return;
+  }
+  s.walk.resize(size_t(s.innerCellCount));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int32_t c = 0; c < s.innerCellCount; ++c) {
+    const glm::ivec4 t = s.cells[size_t(c)];
+    const glm::vec3 v[4] = {s.positions[size_t(t[0])], s.positions[size_t(t[1])],
+                            s.positions[size_t(t[2])], s.positions[size_t(t[3])]};
+    ProbeWalkCell& w = s.walk[size_t(c)];
+    w.origin = v[0];
+    w.next = s.neighbours[size_t(c)];
+    if (!walkRows(v, w.rows)) w.rows.fill(glm::vec3(nan));
+  }
+}
+
+ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                          const ProbeBlendSettings& blend) noexcept {
+  return locate(s, p, hint, blend, true);
+}
+
+ProbeLocation locateProbeExact(const ProbeSet& s, glm::vec3 p, int32_t hint,
+                               const ProbeBlendSettings& blend) noexcept {
+  return locate(s, p, hint, blend, false);
 }
 
 void weightByVisibility(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc,

@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "binary_file.h"
 #include "kiln/probe_runtime.h"
@@ -226,16 +227,20 @@ void computeOuterCellCubics(ProbeSet& set) {
   }
 }
 
+// One pass over the inner cells, no walks: each grid cell's seed is, among the cells whose
+// centroid falls in it, the one whose centroid is nearest its centre; grid cells that no
+// centroid falls in take the seed of the nearest grid cell that has one (a breadth-first
+// sweep over the grid). A query then starts within about a grid cell of its point.
 void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
   set.grid = ProbeSeedGrid{};
   if (set.dimension < 2 || set.innerCellCount <= 0) return;
+  const int corners = set.dimension == 3 ? 4 : 3;
+  // The bounds of every probe (a sequential pass; a merged or dropped probe only widens them
+  // by a hair, and lookups clamp to the grid anyway).
   glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-lo);
-  for (int32_t c = 0; c < set.innerCellCount; ++c) {
-    for (int k = 0; k < 4; ++k) {
-      if (set.cells[c][k] < 0) continue;
-      lo = glm::min(lo, set.positions[set.cells[c][k]]);
-      hi = glm::max(hi, set.positions[set.cells[c][k]]);
-    }
+  for (const glm::vec3& p : set.positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
   }
   const glm::dvec3 ext = glm::dvec3(hi) - glm::dvec3(lo);
   const double diag = glm::length(ext);
@@ -243,23 +248,54 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
   const double target = std::max(1.0, double(set.innerCellCount) / std::max(1, targetCellsPerSeed));
   const double k = std::cbrt(target / (e.x * e.y * e.z));
   for (int a = 0; a < 3; ++a) {
-    set.grid.size[a] = std::clamp(int(std::lround(e[a] * k)), 1, 64);
+    set.grid.size[a] = std::clamp(int(std::lround(e[a] * k)), 1, kSeedGridMaxAxis);
   }
   set.grid.min = lo;
   set.grid.max = hi;
   const glm::ivec3 n = set.grid.size;
-  std::vector<int32_t> seeds(size_t(n.x) * n.y * n.z, 0);
-  int32_t hint = 0;
-  for (int z = 0; z < n.z; ++z) {
-    for (int y = 0; y < n.y; ++y) {
-      for (int x = 0; x < n.x; ++x) {
-        const glm::vec3 f = (glm::vec3(x, y, z) + 0.5f) / glm::vec3(n);
-        const glm::vec3 p = lo + f * (hi - lo);
-        ProbeBlendSettings cellOnly;
-        cellOnly.visibility = false;
-        const ProbeLocation loc = locateProbe(set, p, hint, cellOnly);
-        hint = loc.cell >= 0 ? loc.cell : 0;
-        seeds[size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * z)] = hint;
+  const size_t count = size_t(n.x) * size_t(n.y) * size_t(n.z);
+  std::vector<int32_t> seeds(count, -1);
+  std::vector<float> best(count, std::numeric_limits<float>::infinity());
+  // Grid coordinates of a point: (p - lo) * scale, the grid cell its integer part.
+  glm::vec3 scale;
+  for (int a = 0; a < 3; ++a) scale[a] = hi[a] > lo[a] ? float(n[a]) / (hi[a] - lo[a]) : 0.0f;
+  const float inv = 1.0f / float(corners);
+  for (int32_t c = 0; c < set.innerCellCount; ++c) {
+    const glm::ivec4 t = set.cells[size_t(c)];
+    glm::vec3 centroid = set.positions[size_t(t[0])] + set.positions[size_t(t[1])] +
+                         set.positions[size_t(t[2])];
+    if (corners == 4) centroid += set.positions[size_t(t[3])];
+    const glm::vec3 f = (centroid * inv - lo) * scale;
+    const glm::ivec3 g = glm::clamp(glm::ivec3(f), glm::ivec3(0), n - 1);
+    const glm::vec3 d = f - (glm::vec3(g) + 0.5f);
+    const float d2 = glm::dot(d, d);
+    const size_t i = size_t(g.x) + size_t(n.x) * (size_t(g.y) + size_t(n.y) * size_t(g.z));
+    if (d2 < best[i]) {
+      best[i] = d2;
+      seeds[i] = c;
+    }
+  }
+  // Breadth-first from the grid cells that have a seed: each empty one takes the seed of the
+  // neighbour that reaches it first.
+  std::vector<uint32_t> queue;
+  queue.reserve(count);
+  for (size_t i = 0; i < count; ++i) {
+    if (seeds[i] >= 0) queue.push_back(uint32_t(i));
+  }
+  const size_t stride[3] = {1, size_t(n.x), size_t(n.x) * size_t(n.y)};
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const size_t i = queue[head];
+    const glm::ivec3 g(int(i % size_t(n.x)), int((i / stride[1]) % size_t(n.y)),
+                       int(i / stride[2]));
+    for (int a = 0; a < 3; ++a) {
+      for (int side = -1; side <= 1; side += 2) {
+        const int x = g[a] + side;
+        if (x < 0 || x >= n[a]) continue;
+        const size_t j = side < 0 ? i - stride[a] : i + stride[a];
+        if (seeds[j] < 0) {
+          seeds[j] = seeds[i];
+          queue.push_back(uint32_t(j));
+        }
       }
     }
   }
@@ -315,40 +351,48 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
       }
     }
   }
+  // The per-slot loops test first and build their message only on failure (a 100k-probe
+  // set has millions of slots).
+  auto slotField = [](const char* array, size_t c, int k) {
+    return std::string(array) + "[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+  };
+  int64_t asymmetricCell = -1;
+  int asymmetricSlot = 0;
   for (size_t c = 0; c < nc; ++c) {
     const bool isOuter = c >= size_t(s.innerCellCount);
     const int used = usedSlots(s.dimension, isOuter);
     for (int k = 0; k < 4; ++k) {
       const int32_t v = s.cells[c][k];
-      const std::string field = "cells[" + std::to_string(c) + "][" + std::to_string(k) + "]";
       if (k < used && (v < 0 || size_t(v) >= np)) {
-        return fail(name, field + ": probe index " + std::to_string(v) +
+        return fail(name, slotField("cells", c, k) + ": probe index " + std::to_string(v) +
                               " out of range (probeCount " + std::to_string(np) + ")");
       }
-      if (k >= used && v != -1) return fail(name, field + ": unused slot must be -1");
-      const int32_t n = s.neighbours[c][k];
-      const std::string nfield =
-          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
-      if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
-        return fail(name, nfield + ": cell index " + std::to_string(n) + " out of range");
+      if (k >= used && v != -1) {
+        return fail(name, slotField("cells", c, k) + ": unused slot must be -1");
       }
-    }
-  }
-  // Symmetry once every index is known to be in range.
-  for (size_t c = 0; c < nc; ++c) {
-    for (int k = 0; k < 4; ++k) {
       const int32_t n = s.neighbours[c][k];
-      const std::string nfield =
-          "neighbours[" + std::to_string(c) + "][" + std::to_string(k) + "]";
-      if (n >= 0) {
+      if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
+        return fail(name, slotField("neighbours", c, k) + ": cell index " + std::to_string(n) +
+                              " out of range");
+      }
+      // Symmetry in the same pass (this index is in range; the cell it names may not be
+      // checked yet, but only compared with c). Reported after the range checks, as the
+      // first asymmetric slot, so an out-of-range index is named as such wherever it is.
+      if (n >= 0 && asymmetricCell < 0) {
         const glm::ivec4 back = s.neighbours[size_t(n)];
         const int32_t ci = int32_t(c);
         if (back[0] != ci && back[1] != ci && back[2] != ci && back[3] != ci) {
-          return fail(name, nfield + ": cell " + std::to_string(n) +
-                                " does not link back (asymmetric neighbours)");
+          asymmetricCell = int64_t(c);
+          asymmetricSlot = k;
         }
       }
     }
+  }
+  if (asymmetricCell >= 0) {
+    const size_t c = size_t(asymmetricCell);
+    return fail(name, slotField("neighbours", c, asymmetricSlot) + ": cell " +
+                          std::to_string(s.neighbours[c][asymmetricSlot]) +
+                          " does not link back (asymmetric neighbours)");
   }
   for (size_t i = 0; i < outer; ++i) {
     const OuterCell& oc = s.outerCells[i];
@@ -467,6 +511,7 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
   }
   Status st = validateProbeSet(s, name);
   if (!st) return Error{st.error()};
+  prepareProbeLookup(s);
   return s;
 }
 

@@ -3,6 +3,8 @@
 // locateProbe walks from a caller-owned hint cell (e.g. last frame's cell for the object) to
 // the cell containing the point, crossing each time the face with the most negative
 // barycentric coordinate (Cupisz, GDC 2012); without a hint it starts from the seed grid.
+// Each step reads one 64-byte record (ProbeWalkCell) and decides in float where the float
+// error bound allows, with exact predicates near faces: the cell found is the exact walk's.
 // Outside the hull the outer cells extrapolate continuously, so a lookup always succeeds.
 // When the set has per-probe visibility (ProbeSet::visibility) the barycentric weights are
 // multiplied by each probe's visibility of the point and renormalized
@@ -43,6 +45,12 @@ inline constexpr int kMaxWalkSteps = 4096;
 // `blend` decides the weights (visibility-weighted by default when the set has visibility).
 ProbeLocation locateProbe(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
                           const ProbeBlendSettings& blend = {}) noexcept;
+
+// The same lookup with the exact predicates at every step of the walk (locateProbe trusts
+// float barycentric coordinates away from faces and gives the same cell): the reference the
+// fast path is tested against.
+ProbeLocation locateProbeExact(const ProbeSet& set, glm::vec3 p, int32_t hint = -1,
+                               const ProbeBlendSettings& blend = {}) noexcept;
 
 // Replaces location.weights by location.barycentric x each probe's visibility of p, divided by
 // max(their sum, blend.minVisibleWeight) (plain barycentric when blend.visibility is false or

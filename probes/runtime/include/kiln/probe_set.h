@@ -97,6 +97,21 @@ struct ProbeVisibility {
   }
 };
 
+// What one step of the walk through a tetrahedron reads, in one 64-byte record (derived from
+// positions, cells and neighbours by prepareProbeLookup; not stored in the .kprobe file): the
+// barycentric coordinates of p in float, l_k = dot(rows[k - 1], p - origin) for k = 1, 2, 3
+// and l_0 = 1 - l_1 - l_2 - l_3 (rows: the inverse of the edge matrix [v1 - v0, v2 - v0,
+// v3 - v0], origin = v0), and next[k] = neighbours[cell][k]. The lookup trusts the float
+// signs only beyond an error bound (probe_runtime.cpp) and uses the exact predicates
+// otherwise; rows are NaN for a cell whose map cannot be made accurate to float precision
+// (an extreme sliver), which then always takes the exact path.
+struct alignas(64) ProbeWalkCell {
+  glm::vec3 origin{0.0f};
+  std::array<glm::vec3, 3> rows{};
+  glm::ivec4 next{-1};
+};
+static_assert(sizeof(ProbeWalkCell) == 64);
+
 struct ProbeSet {
   int32_t dimension = 3;
   std::vector<glm::vec3> positions;
@@ -111,6 +126,11 @@ struct ProbeSet {
   std::vector<glm::vec4> occlusion;
   std::array<int32_t, kProbeOcclusionChannels> occlusionLights{-1, -1, -1, -1};
   ProbeVisibility visibility;  // empty = blend by barycentric weights alone
+  // Derived walk records, one per inner cell (dimension 3): filled by prepareProbeLookup,
+  // which buildProbeTopology and the .kprobe readers call. Empty (or stale in size) = the
+  // lookup walks with the exact predicates alone. Call prepareProbeLookup again after
+  // changing positions, cells or neighbours.
+  std::vector<ProbeWalkCell> walk;
 
   int32_t probeCount() const { return int32_t(positions.size()); }
   int32_t cellCount() const { return int32_t(cells.size()); }
@@ -121,8 +141,15 @@ struct ProbeSet {
 // zeros otherwise). Called by the bake after the normals are set.
 void computeOuterCellCubics(ProbeSet& set);
 
-// Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most 64 per axis, each
-// seed being the cell that contains the grid cell's centre. Requires a complete topology.
+// Fills set.walk from positions, cells and neighbours (dimension 3; cleared otherwise).
+// Requires a complete, valid topology (validateProbeSet).
+void prepareProbeLookup(ProbeSet& set);
+
+// Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most kSeedGridMaxAxis
+// per axis, each seed a cell whose centroid lies in the grid cell (the one nearest its
+// centre), or for a grid cell no centroid falls in, the nearest grid cell's seed. Requires a
+// complete topology.
+inline constexpr int kSeedGridMaxAxis = 128;
 void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 
 // Checks everything the lookup relies on: sizes agree, indices in range, neighbour links
