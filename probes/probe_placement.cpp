@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "kiln/probe_runtime.h"
+#include "probes/placement_evaluation.h"
 #include "probes/tetrahedralize.h"
 #include "src/integrator.h"
 #include "src/parallel.h"
@@ -768,18 +769,20 @@ Status ProbePlacer::bakeTruth() {
     progress.finish();
   }
   if (candidateSh_.empty()) return Error{"cancelled"};
-  checks_ = randomValidPoints(scene_, tracer_, volumes_, settings_.checkPoints,
-                              hashValues(settings_.seed, kCheckPointTag), settings_.validity,
-                              settings_.threads);
-  if (checks_.empty()) return Error{"placement: no valid check points in the volumes"};
-  result_.checkPoints = uint32_t(checks_.size());
   ProbeBakeSettings truthBake = bake_;
   truthBake.seed = hashValues(settings_.seed, kTruthTag);
-  truth_ = bakePointSh(scene_, tracer_, checks_, truthBake, nullptr, cancel_);
-  if (truth_.empty()) return Error{"cancelled"};
-  double meanRms = 0.0;
-  for (const ShL2Rgb& t : truth_) meanRms += irradianceRms(t);
-  floor_ = float(kErrorFloorFraction * meanRms / double(truth_.size()));
+  Result<TruthPoints> truth =
+      bakeTruthPoints(scene_, tracer_, volumes_, settings_.checkPoints,
+                      hashValues(settings_.seed, kCheckPointTag), settings_.validity, truthBake,
+                      nullptr, cancel_);
+  if (!truth) {
+    if (isCancelled()) return Error{"cancelled"};
+    return Error{"placement: check points: " + truth.error()};
+  }
+  checks_ = std::move(truth->points);
+  truth_ = std::move(truth->sh);
+  floor_ = truth->floor;
+  result_.checkPoints = uint32_t(checks_.size());
   return Status::success();
 }
 

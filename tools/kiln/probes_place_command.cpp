@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "probes/octree_placement.h"
+#include "probes/placement_evaluation.h"
 #include "probes/probe_baker.h"
 #include "probes/probe_placement.h"
 #include "src/progress.h"
@@ -285,74 +286,60 @@ int runCompare(const CompareOptions& o) {
   // Evaluation points and their ground truth: a different seed from placement's check points.
   const uint64_t evalSeed =
       hashValues(o.evalSeed ? *o.evalSeed : o.common.seed, 0x6576616cULL);  // "eval"
-  const std::vector<vec3> points = randomValidPoints(scene, tracer, volumes, uint32_t(o.points),
-                                                     evalSeed, settings.validity, o.common.threads);
   ProbeBakeSettings bake;
   bake.rays = uint32_t(o.evalRays);
   bake.seed = evalSeed;
   bake.threads = o.common.threads;
   bake.dering = false;  // the truth is not deringed either: compare like with like
   bake.fillInvalid = false;
-  std::vector<ShL2Rgb> truth;
-  {
-    Progress progress("truth", points.size(), "points", !o.common.quiet);
-    truth = bakePointSh(scene, tracer, points, bake, &progress, &cancelFlag());
+  Result<TruthPoints> truth = [&] {
+    Progress progress("truth", uint32_t(o.points), "points", !o.common.quiet);
+    Result<TruthPoints> t = bakeTruthPoints(scene, tracer, volumes, uint32_t(o.points), evalSeed,
+                                            settings.validity, bake, &progress, &cancelFlag());
     progress.finish();
+    return t;
+  }();
+  if (cancelFlag().load()) return reportInterrupted("outputs");
+  if (!truth) {
+    printError(o.common.scene + ": evaluation points: " + truth.error());
+    return kExitBadInput;
   }
-  if (truth.empty() || cancelFlag().load()) return reportInterrupted("outputs");
-  double meanRms = 0.0;
-  for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
-  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
-  // The measure's noise: a second bake of the points with another seed against the truth.
-  // Probes have the same noise (same rays), so no method can score much below this (a blend
-  // of four probes averages theirs down to between 1/sqrt(2) and 1 times it).
-  std::vector<ShL2Rgb> rebaked;
-  {
-    ProbeBakeSettings again = bake;
-    again.seed = hashValues(evalSeed, 0x6e6f697365ULL);  // "noise"
-    Progress progress("noise", points.size(), "points", !o.common.quiet);
-    rebaked = bakePointSh(scene, tracer, points, again, &progress, &cancelFlag());
-    progress.finish();
-  }
-  if (rebaked.empty() || cancelFlag().load()) return reportInterrupted("outputs");
-  std::vector<float> noiseErrors(points.size());
-  for (size_t i = 0; i < points.size(); ++i)
-    noiseErrors[i] = relativeIrradianceError(truth[i], rebaked[i], floor);
-  const FieldError noise = summarizeFieldError(std::move(noiseErrors));
-  std::vector<uint8_t> nearWall(points.size());
-  for (size_t i = 0; i < points.size(); ++i)
-    nearWall[i] = probePoint(scene, tracer, points[i], 256).nearestDistance < 0.5f;
+  const std::vector<vec3>& points = truth->points;
 
   // Every method's probes are baked once, with visibility maps as `kiln probes bake` makes
   // them (per-probe maxDistance to the scene's farthest corner), and measured with both blends.
-  bake.seed = o.common.seed;
-  bake.visibilityResolution = o.common.visibilityResolution > 0 ? o.common.visibilityResolution
-                                                                 : kDefaultVisibilityResolution;
-  ProbeBlendSettings plainBlend;
-  plainBlend.visibility = false;
-  // Mean of per-point errors over the points within 0.5 m of a surface.
-  auto nearWallMean = [&](const std::vector<float>& perPoint) {
-    double sum = 0.0;
-    size_t n = 0;
-    for (size_t i = 0; i < points.size(); ++i)
-      if (nearWall[i]) sum += perPoint[i], ++n;
-    return n ? float(sum / double(n)) : 0.0f;
-  };
+  ProbeBakeSettings probeBake = bake;
+  probeBake.seed = o.common.seed;
+  probeBake.visibilityResolution = o.common.visibilityResolution > 0
+                                       ? o.common.visibilityResolution
+                                       : kDefaultVisibilityResolution;
+  const PlacementEvaluation evaluation(scene, tracer, *truth, probeBake);
+  // The measure's noise: a second bake of the points with another seed against the truth.
+  // Probes have the same noise (same rays), so no method can score much below this (a blend
+  // of four probes averages theirs down to between 1/sqrt(2) and 1 times it).
+  Result<FieldError> noise = [&] {
+    Progress progress("noise", points.size(), "points", !o.common.quiet);
+    Result<FieldError> n = evaluation.noise(bake, hashValues(evalSeed, 0x6e6f697365ULL),  // "noise"
+                                            &progress, &cancelFlag());
+    progress.finish();
+    return n;
+  }();
+  if (!noise || cancelFlag().load()) return reportInterrupted("outputs");
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds) -> std::optional<Row> {
-    Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, &cancelFlag());
-    if (!set) {
-      printError(method + ": " + set.error());
+    Result<ProbeSetError> e = evaluation.measure(positions, &cancelFlag());
+    if (!e) {
+      printError(method + ": " + e.error());
       return std::nullopt;
     }
     Row row;
     row.method = method;
     row.count = positions.size();
-    row.error = measureFieldError(*set, points, truth, floor, o.common.threads);
-    row.plain = measureFieldError(*set, points, truth, floor, o.common.threads, plainBlend);
-    row.nearWall = nearWallMean(row.error.perPoint);
-    row.nearWallPlain = nearWallMean(row.plain.perPoint);
-    row.crossing = countCellsCrossingGeometry(tracer, *set);
+    row.error = std::move(e->visibility);
+    row.plain = std::move(e->plain);
+    row.nearWall = e->nearWall;
+    row.nearWallPlain = e->nearWallPlain;
+    row.crossing = e->crossing;
     row.seconds = seconds;
     return row;
   };
@@ -361,8 +348,8 @@ int runCompare(const CompareOptions& o) {
   {
     Row r;
     r.method = "noise (rebake)";
-    r.error = r.plain = noise;
-    r.nearWall = r.nearWallPlain = nearWallMean(noise.perPoint);
+    r.error = r.plain = *noise;
+    r.nearWall = r.nearWallPlain = evaluation.nearWallMean(noise->perPoint);
     rows.push_back(std::move(r));
   }
   // A baseline at the same count: placed (timed), baked and measured.
@@ -476,8 +463,8 @@ int runCompare(const CompareOptions& o) {
     pc << "\n";
     pc << std::setprecision(6);
     for (size_t i = 0; i < points.size(); ++i) {
-      pc << points[i].x << "," << points[i].y << "," << points[i].z << "," << int(nearWall[i])
-         << "," << irradianceRms(truth[i]);
+      pc << points[i].x << "," << points[i].y << "," << points[i].z << ","
+         << int(evaluation.nearWall()[i]) << "," << irradianceRms(truth->sh[i]);
       for (const Row& r : rows) pc << "," << r.error.perPoint[i];
       for (const Row& r : rows) pc << "," << r.plain.perPoint[i];
       pc << "\n";
