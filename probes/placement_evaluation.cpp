@@ -2,16 +2,73 @@
 // compare-placement and the placement chart (see placement_evaluation.h).
 #include "probes/placement_evaluation.h"
 
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+#include "src/parallel.h"
+#include "src/sampling.h"
+
 namespace kiln {
+
+namespace {
+constexpr uint64_t kObjectPointTag = 0x6f626a656374ULL;  // "object"
+}
+
+std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer,
+                                        std::span<const Bounds3> volumes, uint32_t count,
+                                        uint64_t seed, const ProbeValiditySettings& validity,
+                                        const PointSampling& sampling, int threads) {
+  const ReachableSpace* reachable = sampling.reachable;
+  std::function<bool(vec3)> accept;
+  if (reachable && reachable->enabled())
+    accept = [reachable](vec3 p) { return reachable->reachable(p); };
+  const uint32_t objects = std::min(
+      count, uint32_t(std::lround(double(count) * double(std::clamp(sampling.objectShare, 0.0f,
+                                                                     1.0f)))));
+  std::vector<vec3> points(objects);
+  std::vector<uint8_t> found(objects, 0);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 8;
+  parallelFor(
+      objects,
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          const uint64_t key = hashValues(seed, kObjectPointTag, i);
+          for (uint32_t attempt = 0; attempt < 256; ++attempt) {
+            SampleStream stream(key, attempt);
+            const vec2 uxz = stream.get2D();
+            const vec2 u = stream.get2D();
+            const std::optional<vec3> p = objectPoint(tracer, volumes, uxz, u.x, u.y,
+                                                      sampling.minHeight, sampling.maxHeight);
+            if (p && isValidProbePoint(scene, tracer, *p, validity) && (!accept || accept(*p))) {
+              points[i] = *p;
+              found[i] = 1;
+              break;
+            }
+          }
+        }
+      },
+      options);
+  std::vector<vec3> out;
+  for (uint32_t i = 0; i < objects; ++i)
+    if (found[i]) out.push_back(points[i]);
+  const std::vector<vec3> uniform =
+      randomValidPoints(scene, tracer, volumes, count - objects, seed, validity, threads, accept);
+  out.insert(out.end(), uniform.begin(), uniform.end());
+  return out;
+}
 
 Result<TruthPoints> bakeTruthPoints(const Scene& scene, const Tracer& tracer,
                                     std::span<const Bounds3> volumes, uint32_t count,
                                     uint64_t pointSeed, const ProbeValiditySettings& validity,
                                     const ProbeBakeSettings& bake, Progress* progress,
-                                    const std::atomic<bool>* cancel) {
+                                    const std::atomic<bool>* cancel,
+                                    const PointSampling& sampling) {
   TruthPoints out;
-  out.points = randomValidPoints(scene, tracer, volumes, count, pointSeed, validity,
-                                 bake.threads);
+  out.points = randomPlacementPoints(scene, tracer, volumes, count, pointSeed, validity, sampling,
+                                     bake.threads);
   if (out.points.empty()) return Error{"no valid points in the volumes"};
   out.sh = bakePointSh(scene, tracer, out.points, bake, progress, cancel);
   if (out.sh.empty() || (cancel && cancel->load())) return Error{"cancelled"};
@@ -37,19 +94,63 @@ float PlacementEvaluation::nearWallMean(std::span<const float> perPoint) const {
   return n ? float(sum / double(n)) : 0.0f;
 }
 
-Result<ProbeSetError> PlacementEvaluation::measure(std::span<const vec3> positions,
-                                                   const std::atomic<bool>* cancel) const {
-  Result<ProbeSet> set = bakeProbes(scene_, tracer_, positions, bake_, nullptr, cancel);
-  if (!set) return Error{set.error()};
+Result<ProbeSet> PlacementEvaluation::bake(std::span<const vec3> positions,
+                                           const std::atomic<bool>* cancel) const {
+  return bakeProbes(scene_, tracer_, positions, bake_, nullptr, cancel);
+}
+
+ProbeSetError PlacementEvaluation::measure(const ProbeSet& set) const {
   ProbeSetError out;
   ProbeBlendSettings plainBlend;
   plainBlend.visibility = false;
-  out.visibility = measureFieldError(*set, truth_.points, truth_.sh, truth_.floor, bake_.threads);
-  out.plain = measureFieldError(*set, truth_.points, truth_.sh, truth_.floor, bake_.threads,
+  out.visibility = measureFieldError(set, truth_.points, truth_.sh, truth_.floor, bake_.threads);
+  out.plain = measureFieldError(set, truth_.points, truth_.sh, truth_.floor, bake_.threads,
                                 plainBlend);
   out.nearWall = nearWallMean(out.visibility.perPoint);
   out.nearWallPlain = nearWallMean(out.plain.perPoint);
-  out.crossing = countCellsCrossingGeometry(tracer_, *set);
+  out.crossing = countCellsCrossingGeometry(tracer_, set);
+  return out;
+}
+
+Result<ProbeSetError> PlacementEvaluation::measure(std::span<const vec3> positions,
+                                                   const std::atomic<bool>* cancel) const {
+  Result<ProbeSet> set = bake(positions, cancel);
+  if (!set) return Error{set.error()};
+  return measure(*set);
+}
+
+SphereError sphereError(const ProbeSet& set, const TruthPoints& truth, int threads) {
+  SphereError out;
+  out.points = truth.points.size();
+  out.perPoint.assign(out.points, 0.0f);
+  out.ratio.assign(out.points, 1.0f);
+  ParallelOptions options;
+  options.threads = threads;
+  options.grain = 32;
+  parallelFor(
+      out.points,
+      [&](size_t begin, size_t end) {
+        int32_t hint = -1;
+        for (size_t i = begin; i < end; ++i) {
+          const ProbeLocation loc = locateProbe(set, truth.points[i], hint);
+          hint = loc.cell;
+          const ShL2Rgb estimate = interpolateProbes(set, loc);
+          out.perPoint[i] = relativeIrradianceError(truth.sh[i], estimate, truth.floor);
+          const float t = luminance(truth.sh[i].c[0]), e = luminance(estimate.c[0]);
+          out.ratio[i] = t > 0.0f ? e / t : (e > 0.0f ? kInfinity : 1.0f);
+        }
+      },
+      options);
+  if (out.points == 0) return out;
+  std::vector<float> sorted = out.perPoint;
+  std::sort(sorted.begin(), sorted.end());
+  out.median = sorted[sorted.size() / 2];
+  double sum = 0.0;
+  for (float e : sorted) sum += e;
+  out.mean = float(sum / double(sorted.size()));
+  out.worstRatio = 1.0f;
+  for (float r : out.ratio)
+    out.worstRatio = std::max(out.worstRatio, r > 0.0f ? std::max(r, 1.0f / r) : kInfinity);
   return out;
 }
 

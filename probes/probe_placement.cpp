@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "kiln/probe_runtime.h"
+#include "probes/object_space.h"
 #include "probes/placement_evaluation.h"
 #include "probes/tetrahedralize.h"
 #include "src/integrator.h"
@@ -161,7 +162,7 @@ std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds
 std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
                                     std::span<const Bounds3> volumes, uint32_t count,
                                     uint64_t seed, const ProbeValiditySettings& validity,
-                                    int threads) {
+                                    int threads, const std::function<bool(vec3)>& accept) {
   std::vector<float> weights;
   for (const Bounds3& b : volumes) weights.push_back(volumeOf(b));
   const Distribution1D pick(weights);
@@ -181,7 +182,7 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
             const vec2 u = stream.get2D();
             const float w = stream.get1D();
             const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
-            if (isValidProbePoint(scene, tracer, p, validity)) {
+            if (isValidProbePoint(scene, tracer, p, validity) && (!accept || accept(p))) {
               points[i] = p;
               found[i] = 1;
               break;
@@ -454,6 +455,7 @@ struct Candidate {
   vec3 original;
   bool moved = false;
   std::string why;
+  bool fixed = false;  // a fixed probe (ProbePlacementSettings::fixedProbes)
 };
 
 // Octree corners over one volume (Godot LightmapGI's candidates): cells split down to maxDepth
@@ -649,6 +651,7 @@ class ProbePlacer {
   ProbePlacement result_;
 
   std::vector<Bounds3> volumes_;
+  std::optional<ReachableSpace> reachable_;  // when settings.reachableOnly
   float totalVolume_ = 0.0f;
   float spacing_ = 0.0f;
   ProbeBakeSettings bake_;           // the cheap bakes' settings (rays = candidateRays)
@@ -678,10 +681,20 @@ class ProbePlacer {
   std::vector<std::pair<float, std::vector<uint32_t>>> accepted_;
   std::vector<uint32_t> snapshotsLeft_;
   std::vector<uint32_t> snapshotRequested_;  // the count each recorded snapshot stands for
+  bool ranOutOfPicks_ = false;  // growth stopped: no candidate left near a bad check point
 };
 
 Status ProbePlacer::checkSettings(const ProbePlacementSettings& settings) {
   if (settings.budget < 4) return Error{"placement: budget must be at least 4"};
+  if (!settings.fixedProbes.empty() && settings.budget <= settings.fixedProbes.size())
+    return Error{"placement: the budget (" + std::to_string(settings.budget) +
+                 ") must exceed the fixed probes (" + std::to_string(settings.fixedProbes.size()) +
+                 ")"};
+  for (size_t i = 0; i < settings.fixedProbes.size(); ++i)
+    if (!isFinite(settings.fixedProbes[i]))
+      return Error{"placement: fixed probe " + std::to_string(i) + ": not finite"};
+  if (!(settings.floorHeight >= 0.0f) || !std::isfinite(settings.floorHeight))
+    return Error{"placement: floorHeight must be a finite number >= 0"};
   if (settings.maxDepth < 0 || settings.maxDepth > 6)
     return Error{"placement: maxDepth must be in [0, 6]"};
   if (settings.candidateRays == 0 || settings.checkPoints == 0)
@@ -712,6 +725,17 @@ Result<ProbePlacement> ProbePlacer::run() {
   bake_ = settings_.bake;
   bake_.rays = settings_.candidateRays;
   bake_.threads = settings_.threads;
+  if (settings_.reachableOnly) {
+    ReachableSpaceSettings rs;
+    rs.seeds = settings_.fixedProbes;
+    rs.threads = settings_.threads;
+    reachable_ = ReachableSpace::build(scene_, tracer_, volumes_, rs, cancel_);
+    if (isCancelled()) return Error{"cancelled"};
+    if (reachable_->enabled()) {
+      result_.reachableCells = reachable_->reachedCells();
+      result_.gridCells = reachable_->cells();
+    }
+  }
 
   if (Status s = makeCandidates(); !s) return Error{s.error()};
   if (Status s = bakeTruth(); !s) return Error{s.error()};
@@ -740,17 +764,56 @@ Status ProbePlacer::makeCandidates() {
                                         settings_.maxDepth, settings_.threads, cancel_))
       raw.push_back(b.min + vec3(k) * cell0 / float(f));
   }
+  // Above walkable surfaces: where objects stand, which the octree's corners reach only at
+  // its cells' heights.
+  const size_t octreeCount = raw.size();
+  if (settings_.floorHeight > 0.0f) {
+    const std::vector<vec3> floors =
+        pointsAboveFloors(tracer_, volumes_, 0.5f * spacing_, settings_.floorHeight,
+                          settings_.validity.minSurfaceDistance);
+    raw.insert(raw.end(), floors.begin(), floors.end());
+  }
   if (isCancelled()) return Error{"cancelled"};
-  const std::vector<RelocatedPoint> relocated = relocateProbePoints(
+  std::vector<RelocatedPoint> relocated = relocateProbePoints(
       scene_, tracer_, raw, settings_.validity, volumes_, settings_.threads, cancel_);
   if (isCancelled()) return Error{"cancelled"};
   for (const RelocatedPoint& r : relocated) result_.candidatesDropped += r.valid ? 0u : 1u;
+  // Sealed space: relocation can also move a point out of a wall into a cavity inside it.
+  if (reachable_ && reachable_->enabled()) {
+    std::vector<uint8_t> unreachable(relocated.size(), 0);
+    ParallelOptions options;
+    options.threads = settings_.threads;
+    options.grain = 64;
+    parallelFor(
+        relocated.size(),
+        [&](size_t begin, size_t end) {
+          for (size_t i = begin; i < end; ++i)
+            unreachable[i] = relocated[i].valid && !reachable_->reachable(relocated[i].position);
+        },
+        options);
+    for (size_t i = 0; i < relocated.size(); ++i)
+      if (unreachable[i]) {
+        relocated[i].valid = false;
+        ++result_.candidatesUnreachable;
+      }
+  }
+  // Fixed probes first (indices 0..F-1), as given; candidates on top of one are left out.
+  for (const vec3& p : settings_.fixedProbes) {
+    Candidate c{p, p, false, "", true};
+    candidates_.push_back(c);
+  }
+  result_.fixedProbes = uint32_t(settings_.fixedProbes.size());
   for (size_t i : distinctValidPoints(relocated, settings_.validity.minSurfaceDistance)) {
     const RelocatedPoint& r = relocated[i];
+    bool onFixed = false;
+    for (const vec3& fixedAt : settings_.fixedProbes)
+      onFixed = onFixed || glm::length(fixedAt - r.position) < 0.5f * settings_.validity.minSurfaceDistance;
+    if (onFixed) continue;
     candidates_.push_back(Candidate{r.position, raw[i], r.moved, r.why});
     result_.candidatesMoved += r.moved ? 1u : 0u;
+    result_.candidatesAboveFloors += i >= octreeCount ? 1u : 0u;
   }
-  result_.candidates = uint32_t(candidates_.size());
+  result_.candidates = uint32_t(candidates_.size() - settings_.fixedProbes.size());
   if (candidates_.size() < 4) return Error{"placement: fewer than 4 valid candidates"};
   return Status::success();
 }
@@ -771,10 +834,13 @@ Status ProbePlacer::bakeTruth() {
   if (candidateSh_.empty()) return Error{"cancelled"};
   ProbeBakeSettings truthBake = bake_;
   truthBake.seed = hashValues(settings_.seed, kTruthTag);
+  PointSampling sampling;
+  sampling.reachable = reachable_ ? &*reachable_ : nullptr;
+  sampling.objectShare = settings_.floorHeight > 0.0f ? settings_.objectCheckShare : 0.0f;
   Result<TruthPoints> truth =
       bakeTruthPoints(scene_, tracer_, volumes_, settings_.checkPoints,
                       hashValues(settings_.seed, kCheckPointTag), settings_.validity, truthBake,
-                      nullptr, cancel_);
+                      nullptr, cancel_, sampling);
   if (!truth) {
     if (isCancelled()) return Error{"cancelled"};
     return Error{"placement: check points: " + truth.error()};
@@ -783,6 +849,9 @@ Status ProbePlacer::bakeTruth() {
   truth_ = std::move(truth->sh);
   floor_ = truth->floor;
   result_.checkPoints = uint32_t(checks_.size());
+  result_.checkPointsAboveFloors =
+      std::min(result_.checkPoints,
+               uint32_t(std::lround(double(settings_.checkPoints) * double(sampling.objectShare))));
   return Status::success();
 }
 
@@ -883,9 +952,14 @@ std::vector<uint32_t> ProbePlacer::startSet(bool withCorners) const {
   initial = std::min({initial, settings_.budget, uint32_t(candidates_.size())});
   std::vector<uint32_t> sel;
   std::vector<uint8_t> in(candidates_.size(), 0);
+  const uint32_t fixed = uint32_t(settings_.fixedProbes.size());
   for (float h = std::cbrt(totalVolume_ / float(initial)); sel.size() < 4; h *= 0.8f) {
     sel.clear();
     std::fill(in.begin(), in.end(), 0);
+    for (uint32_t i = 0; i < fixed; ++i) {
+      in[i] = 1;
+      sel.push_back(i);
+    }
     for (const Bounds3& b : volumes_) {
       const vec3 e = b.extent();
       ivec3 n;
@@ -941,6 +1015,7 @@ Status ProbePlacer::chooseStart() {
   for (uint32_t i : selected_) inSet_[i] = 1;
   accepted_ = {{current_->score, selected_}};
   result_.initialError = current_->score;
+  result_.largestSet = uint32_t(selected_.size());
   result_.errorHistory.push_back(current_->score);
   takeSnapshots(selected_);
   spawnedFrom_.assign(checks_.size(), 0);
@@ -1075,7 +1150,10 @@ void ProbePlacer::grow() {
         pickPositions.push_back(candidates_[size_t(c)].position);
       }
     }
-    if (picks.empty()) break;
+    if (picks.empty()) {
+      ranOutOfPicks_ = true;
+      break;
+    }
     if (!spawned.empty() && !addSpawned(spawned)) break;  // cancelled
     if (settings_.leakWeight > 0.0f && picks.size() > 0) {
       rejectLeakyPicks(&picks);
@@ -1092,6 +1170,7 @@ void ProbePlacer::grow() {
     selected_ = std::move(trial);
     current_ = std::move(e);
     accepted_.push_back({current_->score, selected_});
+    result_.largestSet = std::max(result_.largestSet, uint32_t(selected_.size()));
     ++result_.rounds;
     if (current_->score <= best_.score) {
       best_ = *current_;
@@ -1117,6 +1196,7 @@ bool ProbePlacer::prune() {
   if (selected_.size() <= 5) return false;
   std::vector<std::pair<float, uint32_t>> redundancy;
   for (size_t k = 0; k < selected_.size(); ++k) {
+    if (candidates_[selected_[k]].fixed) continue;  // the user's: kept
     const vec3 p = candidates_[selected_[k]].position;
     std::vector<std::pair<float, size_t>> near;
     for (size_t m = 0; m < selected_.size(); ++m)
@@ -1130,7 +1210,7 @@ bool ProbePlacer::prune() {
   }
   std::stable_sort(redundancy.begin(), redundancy.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
-  const size_t trials = std::min<size_t>(64, selected_.size() / 4);
+  const size_t trials = std::min<size_t>({64, selected_.size() / 4, redundancy.size()});
   uint32_t removed = 0;
   for (size_t t = 0; t < trials && selected_.size() > 5 && !isCancelled(); ++t) {
     const uint32_t victim = redundancy[t].second;
@@ -1172,13 +1252,32 @@ void ProbePlacer::finishSnapshots() {
 }
 
 ProbePlacement ProbePlacer::finish() {
+  // Fewer than 90% of the budget: say why (the CLI warns with it).
+  if (uint64_t(selected_.size()) * 10 < uint64_t(settings_.budget) * 9) {
+    std::ostringstream why;
+    why << selected_.size() << " of " << settings_.budget << " probes: ";
+    if (best_.score <= settings_.targetError) {
+      why << "the target error " << settings_.targetError << " was reached";
+    } else if (result_.largestSet < uint64_t(settings_.budget) * 9 / 10 && ranOutOfPicks_) {
+      why << "no free candidate was left near the worst check points (" << result_.candidates
+          << " candidates, " << result_.leakRejected
+          << " picks dropped for leaks); more candidates (--depth, --spacing) would help";
+    } else {
+      why << "the best-scoring set is smaller: sets of up to " << result_.largestSet
+          << " probes scored worse at the check points (mean error + leak " << best_.score
+          << " at " << selected_.size()
+          << "); the cheap bakes' noise can outweigh what more probes add (--rays, "
+             "--check-points)";
+    }
+    result_.belowBudget = why.str();
+  }
   result_.estimatedError = current_->score;
   result_.estimatedLeak = current_->leak;
   result_.estimatedError95 = current_->field.p95;
   std::sort(selected_.begin(), selected_.end());
   for (uint32_t i : selected_) {
     const Candidate& c = candidates_[i];
-    result_.probes.push_back(PlacedProbe{c.position, c.original, c.moved, c.why});
+    result_.probes.push_back(PlacedProbe{c.position, c.original, c.moved, c.fixed, c.why});
   }
   result_.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();

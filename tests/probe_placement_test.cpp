@@ -335,7 +335,7 @@ TEST(ProbePlacement, CliWritesPositionsThatBakeReads) {
   std::string out;
   const std::string cmd = std::string(test::kilnExe()) + " probes place " + scene +
                           " --volume 0,0,0,8.25,3,4 --budget 24 --rays 64 --check-points 64"
-                          " --depth 1 -q --out " + dir + "/pos.json";
+                          " --depth 1 --no-scene-probes -q --out " + dir + "/pos.json";
   ASSERT_EQ(test::runCommand(cmd, &out), 0) << out;
   const nlohmann::json doc = nlohmann::json::parse(test::readTextFile(dir + "/pos.json"));
   ASSERT_TRUE(doc.contains("positions"));
