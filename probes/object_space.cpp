@@ -47,8 +47,7 @@ ReachableSpace ReachableSpace::build(const Scene& scene, const Tracer& tracer,
   const vec3 e = out.box_.extent();
   out.cell_ = settings.cellSize > 0.0f ? settings.cellSize
                                        : std::max(0.02f, std::cbrt(e.x * e.y * e.z / 1e5f));
-  for (int k = 0; k < 3; ++k)
-    out.dims_[k] = std::clamp(int(std::ceil(e[k] / out.cell_)), 1, 1024);
+  for (int k = 0; k < 3; ++k) out.dims_[k] = std::clamp(int(std::ceil(e[k] / out.cell_)), 1, 1024);
   const size_t n = size_t(out.dims_.x) * size_t(out.dims_.y) * size_t(out.dims_.z);
   auto cellOf = [&](size_t i) {
     return ivec3(int(i % size_t(out.dims_.x)), int((i / size_t(out.dims_.x)) % size_t(out.dims_.y)),
@@ -160,31 +159,38 @@ bool ReachableSpace::reachable(vec3 p) const {
       for (int dx = -1; dx <= 1; ++dx) {
         const ivec3 q = c + ivec3(dx, dy, dz);
         const int64_t j = index(q);
-        if (j >= 0 && j != own && reached_[size_t(j)] && sees(*tracer_, p, centre(q)))
-          return true;
+        if (j >= 0 && j != own && reached_[size_t(j)] && sees(*tracer_, p, centre(q))) return true;
       }
   return false;
 }
 
-std::vector<Floor> floorsBelow(const Tracer& tracer, float x, float z, float top, float bottom) {
+std::vector<Floor> floorsBelow(const Scene& scene, const Tracer& tracer, float x, float z,
+                               float top, float bottom) {
   std::vector<Floor> out;
   float ceiling = top;
   vec3 origin(x, top, z);
+  // Solids entered minus left along the ray (front faces of single-sided surfaces enter,
+  // their back faces leave; never below 0, as above a room's ceiling seen from outside): an
+  // upward face inside a solid (a floor under a block standing on it) is no floor.
+  int depth = 0;
   for (int k = 0; k < 64 && origin.y > bottom; ++k) {
     Hit hit;
     if (!tracer.intersect(Ray{origin, vec3(0.0f, -1.0f, 0.0f), 0.0f, origin.y - bottom}, hit))
       break;
     const vec3 p = origin + vec3(0.0f, -hit.t, 0.0f);
-    if (!hit.backFace && hit.geometricNormal.y >= 0.7f)
+    if (!hit.backFace && hit.geometricNormal.y >= 0.7f && depth <= 0)
       out.push_back(Floor{p, ceiling - p.y});
+    if (!scene.materialOf(hit.object, hit.triangle).doubleSided)
+      depth = std::max(0, depth + (hit.backFace ? -1 : 1));  // from outside into a room: 0
     ceiling = p.y;
     origin = vec3(x, p.y - 1e-4f, z);
   }
   return out;
 }
 
-std::vector<vec3> pointsAboveFloors(const Tracer& tracer, std::span<const Bounds3> volumes,
-                                    float columnSpacing, float firstHeight, float headroom) {
+std::vector<vec3> pointsAboveFloors(const Scene& scene, const Tracer& tracer,
+                                    std::span<const Bounds3> volumes, float columnSpacing,
+                                    float firstHeight, float headroom) {
   std::vector<vec3> out;
   Bounds3 box;
   for (const Bounds3& b : volumes) box.extend(b);
@@ -197,7 +203,8 @@ std::vector<vec3> pointsAboveFloors(const Tracer& tracer, std::span<const Bounds
     for (int ix = 0; ix < nx; ++ix) {
       const float x = box.min.x + e.x * (float(ix) + 0.5f) / float(nx);
       const float z = box.min.z + e.z * (float(iz) + 0.5f) / float(nz);
-      for (const Floor& f : floorsBelow(tracer, x, z, box.max.y + 1e-3f, box.min.y - 1e-3f)) {
+      for (const Floor& f :
+           floorsBelow(scene, tracer, x, z, box.max.y + 1e-3f, box.min.y - 1e-3f)) {
         float height = firstHeight;
         for (float gap : gaps) {
           height += gap * firstHeight;
@@ -210,15 +217,16 @@ std::vector<vec3> pointsAboveFloors(const Tracer& tracer, std::span<const Bounds
   return out;
 }
 
-std::optional<vec3> objectPoint(const Tracer& tracer, std::span<const Bounds3> volumes, vec2 uxz,
-                                float uFloor, float uHeight, float minHeight, float maxHeight) {
+std::optional<vec3> objectPoint(const Scene& scene, const Tracer& tracer,
+                                std::span<const Bounds3> volumes, vec2 uxz, float uFloor,
+                                float uHeight, float minHeight, float maxHeight) {
   Bounds3 box;
   for (const Bounds3& b : volumes) box.extend(b);
   if (box.empty()) return std::nullopt;
   const float x = box.min.x + box.extent().x * uxz.x;
   const float z = box.min.z + box.extent().z * uxz.y;
   const std::vector<Floor> floors =
-      floorsBelow(tracer, x, z, box.max.y + 1e-3f, box.min.y - 1e-3f);
+      floorsBelow(scene, tracer, x, z, box.max.y + 1e-3f, box.min.y - 1e-3f);
   if (floors.empty()) return std::nullopt;
   const Floor& f = floors[std::min(floors.size() - 1, size_t(uFloor * float(floors.size())))];
   const float hi = std::min(maxHeight, f.clearance - 0.1f);

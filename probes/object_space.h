@@ -24,9 +24,9 @@
 namespace kiln {
 
 struct ReachableSpaceSettings {
-  float cellSize = 0.0f;      // grid cell side (m); 0 = about 100,000 cells over the volumes
-  uint32_t skyRays = 16;      // directions tested per cell for an escape to the sky
-  std::vector<vec3> seeds;    // extra points in reachable space (user probes...)
+  float cellSize = 0.0f;    // grid cell side (m); 0 = about 100,000 cells over the volumes
+  uint32_t skyRays = 16;    // directions tested per cell for an escape to the sky
+  std::vector<vec3> seeds;  // extra points in reachable space (user probes...)
   int threads = 0;
 };
 
@@ -73,20 +73,24 @@ struct Floor {
   float clearance = 0.0f;  // to the next surface above (or to `top`)
 };
 // The floors in the vertical line at (x, z) below `top`, from the top down: front faces of
-// static surfaces whose normal's y is at least 0.7 (slopes up to 45 degrees).
-std::vector<Floor> floorsBelow(const Tracer& tracer, float x, float z, float top, float bottom);
+// static surfaces whose normal's y is at least 0.7 (slopes up to 45 degrees), not inside a
+// solid (an upward face under a block standing on it).
+std::vector<Floor> floorsBelow(const Scene& scene, const Tracer& tracer, float x, float z,
+                               float top, float bottom);
 
 // Points above the floors of a column grid of side `columnSpacing` over the volumes: at
 // heights firstHeight, then gaps of 2, 3, 5, 10 x firstHeight (0.4, 1.2, 2.4, 4.4, 8.4 m for
 // 0.4), below the floor's clearance less `headroom`, inside a volume. Not tested for validity.
-std::vector<vec3> pointsAboveFloors(const Tracer& tracer, std::span<const Bounds3> volumes,
-                                    float columnSpacing, float firstHeight, float headroom);
+std::vector<vec3> pointsAboveFloors(const Scene& scene, const Tracer& tracer,
+                                    std::span<const Bounds3> volumes, float columnSpacing,
+                                    float firstHeight, float headroom);
 
 // A random point where an object stands, from three uniform numbers and one to choose the
 // floor: (x, z) uniform over the volumes' box, one of the floors below uniformly, height
 // uniform in [minHeight, maxHeight] above it (below its clearance less 0.1 m). nullopt when
 // the line has no floor or the point leaves every volume.
-std::optional<vec3> objectPoint(const Tracer& tracer, std::span<const Bounds3> volumes, vec2 uxz,
-                                float uFloor, float uHeight, float minHeight, float maxHeight);
+std::optional<vec3> objectPoint(const Scene& scene, const Tracer& tracer,
+                                std::span<const Bounds3> volumes, vec2 uxz, float uFloor,
+                                float uHeight, float minHeight, float maxHeight);
 
 }  // namespace kiln

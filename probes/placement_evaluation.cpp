@@ -24,8 +24,8 @@ std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer
   if (reachable && reachable->enabled())
     accept = [reachable](vec3 p) { return reachable->reachable(p); };
   const uint32_t objects = std::min(
-      count, uint32_t(std::lround(double(count) * double(std::clamp(sampling.objectShare, 0.0f,
-                                                                     1.0f)))));
+      count,
+      uint32_t(std::lround(double(count) * double(std::clamp(sampling.objectShare, 0.0f, 1.0f)))));
   std::vector<vec3> points(objects);
   std::vector<uint8_t> found(objects, 0);
   ParallelOptions options;
@@ -40,7 +40,7 @@ std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer
             SampleStream stream(key, attempt);
             const vec2 uxz = stream.get2D();
             const vec2 u = stream.get2D();
-            const std::optional<vec3> p = objectPoint(tracer, volumes, uxz, u.x, u.y,
+            const std::optional<vec3> p = objectPoint(scene, tracer, volumes, uxz, u.x, u.y,
                                                       sampling.minHeight, sampling.maxHeight);
             if (p && isValidProbePoint(scene, tracer, *p, validity) && (!accept || accept(*p))) {
               points[i] = *p;
@@ -104,8 +104,8 @@ ProbeSetError PlacementEvaluation::measure(const ProbeSet& set) const {
   ProbeBlendSettings plainBlend;
   plainBlend.visibility = false;
   out.visibility = measureFieldError(set, truth_.points, truth_.sh, truth_.floor, bake_.threads);
-  out.plain = measureFieldError(set, truth_.points, truth_.sh, truth_.floor, bake_.threads,
-                                plainBlend);
+  out.plain =
+      measureFieldError(set, truth_.points, truth_.sh, truth_.floor, bake_.threads, plainBlend);
   out.nearWall = nearWallMean(out.visibility.perPoint);
   out.nearWallPlain = nearWallMean(out.plain.perPoint);
   out.crossing = countCellsCrossingGeometry(tracer_, set);

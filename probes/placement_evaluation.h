@@ -74,7 +74,7 @@ struct ProbeSetError {
 // six axis normals), and the ratio of the sphere's mean irradiance (the luminance of the L00
 // term: E averaged over all normals) to the truth's.
 struct SphereError {
-  float median = 0.0f;      // median relative error
+  float median = 0.0f;  // median relative error
   float mean = 0.0f;
   float worstRatio = 1.0f;  // max over points of max(ratio, 1 / ratio)
   size_t points = 0;

@@ -769,7 +769,7 @@ Status ProbePlacer::makeCandidates() {
   const size_t octreeCount = raw.size();
   if (settings_.floorHeight > 0.0f) {
     const std::vector<vec3> floors =
-        pointsAboveFloors(tracer_, volumes_, 0.5f * spacing_, settings_.floorHeight,
+        pointsAboveFloors(scene_, tracer_, volumes_, 0.5f * spacing_, settings_.floorHeight,
                           settings_.validity.minSurfaceDistance);
     raw.insert(raw.end(), floors.begin(), floors.end());
   }
@@ -807,7 +807,8 @@ Status ProbePlacer::makeCandidates() {
     const RelocatedPoint& r = relocated[i];
     bool onFixed = false;
     for (const vec3& fixedAt : settings_.fixedProbes)
-      onFixed = onFixed || glm::length(fixedAt - r.position) < 0.5f * settings_.validity.minSurfaceDistance;
+      onFixed = onFixed || glm::length(fixedAt - r.position) <
+                               0.5f * settings_.validity.minSurfaceDistance;
     if (onFixed) continue;
     candidates_.push_back(Candidate{r.position, raw[i], r.moved, r.why});
     result_.candidatesMoved += r.moved ? 1u : 0u;
