@@ -26,34 +26,17 @@ std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer
   const uint32_t objects = std::min(
       count,
       uint32_t(std::lround(double(count) * double(std::clamp(sampling.objectShare, 0.0f, 1.0f)))));
-  std::vector<vec3> points(objects);
-  std::vector<uint8_t> found(objects, 0);
-  ParallelOptions options;
-  options.threads = threads;
-  options.grain = 8;
-  parallelFor(
-      objects,
-      [&](size_t begin, size_t end) {
-        for (size_t i = begin; i < end; ++i) {
-          const uint64_t key = hashValues(seed, kObjectPointTag, i);
-          for (uint32_t attempt = 0; attempt < 256; ++attempt) {
-            SampleStream stream(key, attempt);
-            const vec2 uxz = stream.get2D();
-            const vec2 u = stream.get2D();
-            const std::optional<vec3> p = objectPoint(scene, tracer, volumes, uxz, u.x, u.y,
-                                                      sampling.minHeight, sampling.maxHeight);
-            if (p && isValidProbePoint(scene, tracer, *p, validity) && (!accept || accept(*p))) {
-              points[i] = *p;
-              found[i] = 1;
-              break;
-            }
-          }
-        }
-      },
-      options);
-  std::vector<vec3> out;
-  for (uint32_t i = 0; i < objects; ++i)
-    if (found[i]) out.push_back(points[i]);
+  std::vector<vec3> out = rejectionSamplePoints(
+      objects, threads, [&](size_t i, uint32_t attempt) -> std::optional<vec3> {
+        SampleStream stream(hashValues(seed, kObjectPointTag, i), attempt);
+        const vec2 uxz = stream.get2D();
+        const vec2 u = stream.get2D();
+        const std::optional<vec3> p = objectPoint(scene, tracer, volumes, uxz, u.x, u.y,
+                                                  sampling.minHeight, sampling.maxHeight);
+        if (p && isValidProbePoint(scene, tracer, *p, validity) && (!accept || accept(*p)))
+          return p;
+        return std::nullopt;
+      });
   const std::vector<vec3> uniform =
       randomValidPoints(scene, tracer, volumes, count - objects, seed, validity, threads, accept);
   out.insert(out.end(), uniform.begin(), uniform.end());

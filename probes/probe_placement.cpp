@@ -166,6 +166,21 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
   std::vector<float> weights;
   for (const Bounds3& b : volumes) weights.push_back(volumeOf(b));
   const Distribution1D pick(weights);
+  return rejectionSamplePoints(
+      count, threads, [&](size_t i, uint32_t attempt) -> std::optional<vec3> {
+        SampleStream stream(hashValues(seed, kCheckPointTag, i), attempt);
+        const Bounds3& b = volumes[pick.sampleDiscrete(stream.get1D())];
+        const vec2 u = stream.get2D();
+        const float w = stream.get1D();
+        const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
+        if (isValidProbePoint(scene, tracer, p, validity) && (!accept || accept(p))) return p;
+        return std::nullopt;
+      });
+}
+
+std::vector<vec3> rejectionSamplePoints(
+    uint32_t count, int threads,
+    const std::function<std::optional<vec3>(size_t i, uint32_t attempt)>& draw) {
   std::vector<vec3> points(count);
   std::vector<uint8_t> found(count, 0);
   ParallelOptions options;
@@ -174,21 +189,12 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
   parallelFor(
       count,
       [&](size_t begin, size_t end) {
-        for (size_t i = begin; i < end; ++i) {
-          const uint64_t key = hashValues(seed, kCheckPointTag, i);
-          for (uint32_t attempt = 0; attempt < 256; ++attempt) {
-            SampleStream stream(key, attempt);
-            const Bounds3& b = volumes[pick.sampleDiscrete(stream.get1D())];
-            const vec2 u = stream.get2D();
-            const float w = stream.get1D();
-            const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
-            if (isValidProbePoint(scene, tracer, p, validity) && (!accept || accept(p))) {
-              points[i] = p;
+        for (size_t i = begin; i < end; ++i)
+          for (uint32_t attempt = 0; attempt < 256 && !found[i]; ++attempt)
+            if (const std::optional<vec3> p = draw(i, attempt)) {
+              points[i] = *p;
               found[i] = 1;
-              break;
             }
-          }
-        }
       },
       options);
   std::vector<vec3> out;

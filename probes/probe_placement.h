@@ -110,6 +110,14 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
                                     int threads = 0,
                                     const std::function<bool(vec3)>& accept = {});
 
+// Rejection sampling in parallel: point i is the first of 256 attempts for which
+// draw(i, attempt) gives a point; points whose attempts all fail are left out; the rest in
+// index order. `draw` must be thread-safe and a function of (i, attempt) only, so that the
+// result is the same at any thread count.
+std::vector<vec3> rejectionSamplePoints(
+    uint32_t count, int threads,
+    const std::function<std::optional<vec3>(size_t i, uint32_t attempt)>& draw);
+
 // A uniform grid baseline with exactly `count` probes (or an error): the lattice spacing is
 // searched so that, after the same relocation as automatic placement (Unity APV also moves
 // invalid probes), at least `count` valid points remain; the surplus is removed evenly
