@@ -45,7 +45,7 @@ const std::array<Bounds3, 4> kAtriumCavities = {
     Bounds3{vec3(-4.5f, 0.5f, -5.9f), vec3(4.5f, 7.5f, -5.3f)},
     Bounds3{vec3(5.3f, 0.5f, -4.5f), vec3(5.9f, 9.0f, 4.5f)},
     Bounds3{vec3(-5.9f, 0.5f, -4.5f), vec3(-5.3f, 9.0f, 4.5f)}};
-bool inAtriumCavity(vec3 p) {
+[[maybe_unused]] bool inAtriumCavity(vec3 p) {
   for (const Bounds3& b : kAtriumCavities)
     if (b.contains(p)) return true;
   return false;
