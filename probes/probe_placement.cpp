@@ -14,6 +14,8 @@
 #include <sstream>
 
 #include "kiln/probe_runtime.h"
+#include "probes/object_space.h"
+#include "probes/placement_evaluation.h"
 #include "probes/tetrahedralize.h"
 #include "src/integrator.h"
 #include "src/parallel.h"
@@ -160,10 +162,25 @@ std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds
 std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
                                     std::span<const Bounds3> volumes, uint32_t count,
                                     uint64_t seed, const ProbeValiditySettings& validity,
-                                    int threads) {
+                                    int threads, const std::function<bool(vec3)>& accept) {
   std::vector<float> weights;
   for (const Bounds3& b : volumes) weights.push_back(volumeOf(b));
   const Distribution1D pick(weights);
+  return rejectionSamplePoints(
+      count, threads, [&](size_t i, uint32_t attempt) -> std::optional<vec3> {
+        SampleStream stream(hashValues(seed, kCheckPointTag, i), attempt);
+        const Bounds3& b = volumes[pick.sampleDiscrete(stream.get1D())];
+        const vec2 u = stream.get2D();
+        const float w = stream.get1D();
+        const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
+        if (isValidProbePoint(scene, tracer, p, validity) && (!accept || accept(p))) return p;
+        return std::nullopt;
+      });
+}
+
+std::vector<vec3> rejectionSamplePoints(
+    uint32_t count, int threads,
+    const std::function<std::optional<vec3>(size_t i, uint32_t attempt)>& draw) {
   std::vector<vec3> points(count);
   std::vector<uint8_t> found(count, 0);
   ParallelOptions options;
@@ -172,21 +189,12 @@ std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
   parallelFor(
       count,
       [&](size_t begin, size_t end) {
-        for (size_t i = begin; i < end; ++i) {
-          const uint64_t key = hashValues(seed, kCheckPointTag, i);
-          for (uint32_t attempt = 0; attempt < 256; ++attempt) {
-            SampleStream stream(key, attempt);
-            const Bounds3& b = volumes[pick.sampleDiscrete(stream.get1D())];
-            const vec2 u = stream.get2D();
-            const float w = stream.get1D();
-            const vec3 p = b.min + b.extent() * vec3(u.x, u.y, w);
-            if (isValidProbePoint(scene, tracer, p, validity)) {
-              points[i] = p;
+        for (size_t i = begin; i < end; ++i)
+          for (uint32_t attempt = 0; attempt < 256 && !found[i]; ++attempt)
+            if (const std::optional<vec3> p = draw(i, attempt)) {
+              points[i] = *p;
               found[i] = 1;
-              break;
             }
-          }
-        }
       },
       options);
   std::vector<vec3> out;
@@ -453,6 +461,7 @@ struct Candidate {
   vec3 original;
   bool moved = false;
   std::string why;
+  bool fixed = false;  // a fixed probe (ProbePlacementSettings::fixedProbes)
 };
 
 // Octree corners over one volume (Godot LightmapGI's candidates): cells split down to maxDepth
@@ -594,11 +603,104 @@ std::vector<vec3> ProbePlacement::positions() const {
   return out;
 }
 
-Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
-                                   const ProbePlacementSettings& settings,
-                                   const std::atomic<bool>* cancel) {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+// The placement run (docs/probe_placement.md, "Algorithm"): one object holding what the
+// stages share (candidates and their bakes, the check points and their truth, the growing
+// set), each stage a method. run() calls them in order: candidates, truth, start set, grow,
+// prune (which grows again), snapshots.
+class ProbePlacer {
+ public:
+  ProbePlacer(const Scene& scene, const Tracer& tracer, const ProbePlacementSettings& settings,
+              const std::atomic<bool>* cancel)
+      : scene_(scene), tracer_(tracer), settings_(settings), cancel_(cancel) {}
+
+  Result<ProbePlacement> run();
+
+ private:
+  // A set's score: its mean check error plus leakWeight x its leak estimate.
+  struct Scored {
+    FieldError field;
+    float leak = 0.0f;
+    float score = 0.0f;
+  };
+
+  static Status checkSettings(const ProbePlacementSettings& settings);
+  bool isCancelled() const { return cancel_ && cancel_->load(); }
+
+  // Stages.
+  Status makeCandidates();  // 1. octree corners over the volumes, relocated
+  Status bakeTruth();       // 2. cheap bakes of the candidates; check points and their truth
+  Status chooseStart();     // 3. the better of two coarse start sets
+  void grow();              // 4. add probes at the worst check points up to the budget
+  bool prune();             // 5. remove probes that add nothing (true: some were removed)
+  void finishSnapshots();   // 6. the best set of at most N probes for every snapshot count
+  ProbePlacement finish();
+
+  // Helpers of the stages.
+  float leakOf(const ProbeSet& set, const std::vector<uint32_t>& sel);
+  Result<ProbeSet> topology(const std::vector<uint32_t>& sel) const;
+  std::optional<Scored> evaluate(const std::vector<uint32_t>& sel);
+  std::optional<float> leakOfSelection(const std::vector<uint32_t>& sel);
+  std::vector<uint32_t> startSet(bool withCorners) const;
+  void takeSnapshots(const std::vector<uint32_t>& bestSoFar);
+  int64_t nearestCandidate(vec3 p, const std::vector<uint32_t>& exclude) const;
+  bool addSpawned(const std::vector<vec3>& spawned);
+  void rejectLeakyPicks(std::vector<uint32_t>* picks);
+  void keepBest();
+
+  const Scene& scene_;
+  const Tracer& tracer_;
+  const ProbePlacementSettings& settings_;
+  const std::atomic<bool>* cancel_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  ProbePlacement result_;
+
+  std::vector<Bounds3> volumes_;
+  std::optional<ReachableSpace> reachable_;  // when settings.reachableOnly
+  float totalVolume_ = 0.0f;
+  float spacing_ = 0.0f;
+  ProbeBakeSettings bake_;           // the cheap bakes' settings (rays = candidateRays)
+  ProbeBakeSettings candidateBake_;  // ... keyed for the candidates
+
+  // Candidates (spawned probes are appended), their SH and visibility maps (resolution 0
+  // when visibility is off).
+  std::vector<Candidate> candidates_;
+  std::vector<ShL2Rgb> candidateSh_;
+  ProbeVisibility candidateVisibility_;
+  // Check points and the SH baked at them.
+  std::vector<vec3> checks_;
+  std::vector<ShL2Rgb> truth_;
+  float floor_ = 0.0f;
+
+  std::string topologyError_;
+  std::map<std::array<uint32_t, 4>, float> leakCache_;  // by sorted candidate indices
+
+  // The growing set (indices into candidates_), its score, and the best set seen.
+  std::vector<uint32_t> selected_;
+  std::vector<uint8_t> inSet_, rejected_;
+  std::optional<Scored> current_;
+  std::vector<uint32_t> bestSelected_;
+  Scored best_;
+  std::vector<uint8_t> spawnedFrom_;  // per check point: it spawned a probe already
+  // Every set the run accepted, by score: the snapshots are the best of at most N probes.
+  std::vector<std::pair<float, std::vector<uint32_t>>> accepted_;
+  std::vector<uint32_t> snapshotsLeft_;
+  std::vector<uint32_t> snapshotRequested_;  // the count each recorded snapshot stands for
+  bool ranOutOfPicks_ = false;  // growth stopped: no candidate left near a bad check point
+};
+
+Status ProbePlacer::checkSettings(const ProbePlacementSettings& settings) {
   if (settings.budget < 4) return Error{"placement: budget must be at least 4"};
+  if (!settings.fixedProbes.empty() && settings.budget <= settings.fixedProbes.size())
+    return Error{"placement: the budget (" + std::to_string(settings.budget) +
+                 ") must exceed the fixed probes (" + std::to_string(settings.fixedProbes.size()) +
+                 ")"};
+  for (size_t i = 0; i < settings.fixedProbes.size(); ++i)
+    if (!isFinite(settings.fixedProbes[i]))
+      return Error{"placement: fixed probe " + std::to_string(i) + ": not finite"};
+  if (!(settings.floorHeight >= 0.0f) || !std::isfinite(settings.floorHeight))
+    return Error{"placement: floorHeight must be a finite number >= 0"};
   if (settings.maxDepth < 0 || settings.maxDepth > 6)
     return Error{"placement: maxDepth must be in [0, 6]"};
   if (settings.candidateRays == 0 || settings.checkPoints == 0)
@@ -616,459 +718,585 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
     if (!isFinite(b.min) || !isFinite(b.max) || volumeOf(b) <= 0.0f)
       return Error{"placement: volumes[" + std::to_string(i) + "]: empty or not finite"};
   }
-  const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
-  float totalVolume = 0.0f;
-  for (const Bounds3& b : volumes) totalVolume += volumeOf(b);
-  if (!(totalVolume > 0.0f)) return Error{"placement: the scene bounds are empty"};
-  const float spacing =
-      settings.spacing > 0.0f ? settings.spacing : std::cbrt(totalVolume / float(settings.budget));
-  auto isCancelled = [&] { return cancel && cancel->load(); };
+  return Status::success();
+}
 
-  ProbeBakeSettings bake = settings.bake;
-  bake.rays = settings.candidateRays;
-  bake.threads = settings.threads;
-  const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, bake));
+Result<ProbePlacement> ProbePlacer::run() {
+  if (Status s = checkSettings(settings_); !s) return Error{s.error()};
+  volumes_ = placementVolumes(scene_, settings_.volumes);
+  for (const Bounds3& b : volumes_) totalVolume_ += volumeOf(b);
+  if (!(totalVolume_ > 0.0f)) return Error{"placement: the scene bounds are empty"};
+  spacing_ = settings_.spacing > 0.0f ? settings_.spacing
+                                      : std::cbrt(totalVolume_ / float(settings_.budget));
+  bake_ = settings_.bake;
+  bake_.rays = settings_.candidateRays;
+  bake_.threads = settings_.threads;
+  if (settings_.reachableOnly) {
+    ReachableSpaceSettings rs;
+    rs.seeds = settings_.fixedProbes;
+    rs.threads = settings_.threads;
+    reachable_ = ReachableSpace::build(scene_, tracer_, volumes_, rs, cancel_);
+    if (isCancelled()) return Error{"cancelled"};
+    if (reachable_->enabled()) {
+      result_.reachableCells = reachable_->reachedCells();
+      result_.gridCells = reachable_->cells();
+    }
+  }
 
-  // 1. Candidates: octree corners, relocated.
+  if (Status s = makeCandidates(); !s) return Error{s.error()};
+  if (Status s = bakeTruth(); !s) return Error{s.error()};
+  if (Status s = chooseStart(); !s) return Error{s.error()};
+  grow();
+  // Prune, then grow again into the freed budget (two cycles).
+  for (int cycle = 0; settings_.prune && cycle < 2 && !isCancelled(); ++cycle) {
+    if (!prune()) break;
+    grow();
+  }
+  if (isCancelled()) return Error{"cancelled"};
+  finishSnapshots();
+  return finish();
+}
+
+Status ProbePlacer::makeCandidates() {
+  const Integrator integrator(scene_, tracer_, probeIntegratorSettings(scene_, bake_));
   std::vector<vec3> raw;
-  const int f = 1 << settings.maxDepth;
-  for (const Bounds3& b : volumes) {
+  const int f = 1 << settings_.maxDepth;
+  for (const Bounds3& b : volumes_) {
     const vec3 e = b.extent();
     ivec3 n0;
-    for (int k = 0; k < 3; ++k) n0[k] = std::max(1, int(std::ceil(e[k] / spacing - 1e-4f)));
+    for (int k = 0; k < 3; ++k) n0[k] = std::max(1, int(std::ceil(e[k] / spacing_ - 1e-4f)));
     const vec3 cell0 = e / vec3(n0);
-    for (const ivec3& k : octreeCorners(scene, tracer, integrator, b, cell0, n0,
-                                        settings.maxDepth, settings.threads, cancel))
+    for (const ivec3& k : octreeCorners(scene_, tracer_, integrator, b, cell0, n0,
+                                        settings_.maxDepth, settings_.threads, cancel_))
       raw.push_back(b.min + vec3(k) * cell0 / float(f));
   }
-  if (isCancelled()) return Error{"cancelled"};
-  const std::vector<RelocatedPoint> relocated = relocateProbePoints(
-      scene, tracer, raw, settings.validity, volumes, settings.threads, cancel);
-  if (isCancelled()) return Error{"cancelled"};
-  ProbePlacement result;
-  std::vector<Candidate> candidates;
-  for (const RelocatedPoint& r : relocated) result.candidatesDropped += r.valid ? 0u : 1u;
-  for (size_t i : distinctValidPoints(relocated, settings.validity.minSurfaceDistance)) {
-    const RelocatedPoint& r = relocated[i];
-    candidates.push_back(Candidate{r.position, raw[i], r.moved, r.why});
-    result.candidatesMoved += r.moved ? 1u : 0u;
+  // Above walkable surfaces: where objects stand, which the octree's corners reach only at
+  // its cells' heights.
+  const size_t octreeCount = raw.size();
+  if (settings_.floorHeight > 0.0f) {
+    const std::vector<vec3> floors =
+        pointsAboveFloors(scene_, tracer_, volumes_, 0.5f * spacing_, settings_.floorHeight,
+                          settings_.validity.minSurfaceDistance);
+    raw.insert(raw.end(), floors.begin(), floors.end());
   }
-  result.candidates = uint32_t(candidates.size());
-  if (candidates.size() < 4) return Error{"placement: fewer than 4 valid candidates"};
-
-  // 2. Cheap bakes of candidates and check points (the same estimator for both).
-  std::vector<vec3> candidatePositions;
-  for (const Candidate& c : candidates) candidatePositions.push_back(c.position);
-  ProbeBakeSettings candidateBake = bake;
-  candidateBake.seed = hashValues(settings.seed, kCandidateTag);
-  std::vector<ShL2Rgb> candidateSh;
-  ProbeVisibility candidateVisibility;  // resolution 0 when visibility is off
-  {
-    Progress progress("placement candidates", candidatePositions.size(), "probes",
-                      settings.showProgress);
-    candidateSh = bakePointSh(scene, tracer, candidatePositions, candidateBake, &progress, cancel,
-                              &candidateVisibility);
-    progress.finish();
-  }
-  if (candidateSh.empty()) return Error{"cancelled"};
-  const std::vector<vec3> checks =
-      randomValidPoints(scene, tracer, volumes, settings.checkPoints,
-                        hashValues(settings.seed, kCheckPointTag), settings.validity,
-                        settings.threads);
-  if (checks.empty()) return Error{"placement: no valid check points in the volumes"};
-  result.checkPoints = uint32_t(checks.size());
-  ProbeBakeSettings truthBake = bake;
-  truthBake.seed = hashValues(settings.seed, kTruthTag);
-  const std::vector<ShL2Rgb> truth = bakePointSh(scene, tracer, checks, truthBake, nullptr, cancel);
-  if (truth.empty()) return Error{"cancelled"};
-  double meanRms = 0.0;
-  for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
-  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
-
-  // 3. Refinement over index sets into `candidates`. A set's score is its mean check error
-  // plus its leak estimate (cellLeakVolumeError summed over the inner cells, divided by the
-  // volumes' total): the expected error the check points miss in cells that span walls. Both
-  // blend as the runtime will: with the candidates' visibility maps when they have them.
-  std::string topologyError;
-  struct Scored {
-    FieldError field;
-    float leak = 0.0f;
-    float score = 0.0f;
-  };
-  std::map<std::array<uint32_t, 4>, float> leakCache;  // by sorted candidate indices
-  auto leakOf = [&](const ProbeSet& set, const std::vector<uint32_t>& sel) -> float {
-    if (set.dimension != 3) return 0.0f;
-    std::vector<std::array<uint32_t, 4>> keys(size_t(set.innerCellCount));
-    std::vector<std::array<uint32_t, 4>> missing;
-    for (int32_t c = 0; c < set.innerCellCount; ++c) {
-      const glm::ivec4 cell = set.cells[size_t(c)];
-      std::array<uint32_t, 4> key;
-      for (int v = 0; v < 4; ++v) key[size_t(v)] = sel[size_t(cell[v])];
-      std::sort(key.begin(), key.end());
-      keys[size_t(c)] = key;
-      if (!leakCache.count(key)) missing.push_back(key);
-    }
-    std::sort(missing.begin(), missing.end());
-    missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
-    std::vector<float> computed(missing.size(), 0.0f);
+  if (isCancelled()) return Error{"cancelled"};
+  std::vector<RelocatedPoint> relocated = relocateProbePoints(
+      scene_, tracer_, raw, settings_.validity, volumes_, settings_.threads, cancel_);
+  if (isCancelled()) return Error{"cancelled"};
+  for (const RelocatedPoint& r : relocated) result_.candidatesDropped += r.valid ? 0u : 1u;
+  // Sealed space: relocation can also move a point out of a wall into a cavity inside it.
+  if (reachable_ && reachable_->enabled()) {
+    std::vector<uint8_t> unreachable(relocated.size(), 0);
     ParallelOptions options;
-    options.threads = settings.threads;
-    options.grain = 16;
+    options.threads = settings_.threads;
+    options.grain = 64;
     parallelFor(
-        missing.size(),
+        relocated.size(),
         [&](size_t begin, size_t end) {
-          for (size_t m = begin; m < end; ++m) {
-            std::array<vec3, 4> p;
-            std::array<const ShL2Rgb*, 4> sh;
-            CellProbeMaps maps;
-            maps.resolution = candidateVisibility.resolution;
-            for (size_t v = 0; v < 4; ++v) {
-              const uint32_t c = missing[m][v];
-              p[v] = candidates[c].position;
-              sh[v] = &candidateSh[c];
-              if (maps.resolution > 0) {
-                maps.moments[v] = candidateVisibility.probe(int32_t(c));
-                maps.maxDistance[v] = candidateVisibility.maxDistance[c];
-              }
-            }
-            computed[m] = cellLeakVolumeError(tracer, p, sh, floor, maps);
-          }
+          for (size_t i = begin; i < end; ++i)
+            unreachable[i] = relocated[i].valid && !reachable_->reachable(relocated[i].position);
         },
         options);
-    for (size_t m = 0; m < missing.size(); ++m) leakCache[missing[m]] = computed[m];
-    double leak = 0.0;
-    for (const auto& key : keys) leak += leakCache[key];
-    return float(leak / double(totalVolume));
-  };
-  auto topology = [&](const std::vector<uint32_t>& sel) -> Result<ProbeSet> {
-    std::vector<vec3> pos;
-    pos.reserve(sel.size());
-    for (uint32_t i : sel) pos.push_back(candidates[i].position);
-    return buildProbeTopology(pos, ProbeTopologySettings{});
-  };
-  auto evaluate = [&](const std::vector<uint32_t>& sel) -> std::optional<Scored> {
-    Result<ProbeSet> set = topology(sel);
-    if (!set) {
-      topologyError = set.error();
-      return std::nullopt;
+    for (size_t i = 0; i < relocated.size(); ++i)
+      if (unreachable[i]) {
+        relocated[i].valid = false;
+        ++result_.candidatesUnreachable;
+      }
+  }
+  // Fixed probes first (indices 0..F-1), as given; candidates on top of one are left out.
+  for (const vec3& p : settings_.fixedProbes) {
+    Candidate c{p, p, false, "", true};
+    candidates_.push_back(c);
+  }
+  result_.fixedProbes = uint32_t(settings_.fixedProbes.size());
+  for (size_t i : distinctValidPoints(relocated, settings_.validity.minSurfaceDistance)) {
+    const RelocatedPoint& r = relocated[i];
+    bool onFixed = false;
+    for (const vec3& fixedAt : settings_.fixedProbes)
+      onFixed = onFixed || glm::length(fixedAt - r.position) <
+                               0.5f * settings_.validity.minSurfaceDistance;
+    if (onFixed) continue;
+    candidates_.push_back(Candidate{r.position, raw[i], r.moved, r.why});
+    result_.candidatesMoved += r.moved ? 1u : 0u;
+    result_.candidatesAboveFloors += i >= octreeCount ? 1u : 0u;
+  }
+  result_.candidates = uint32_t(candidates_.size() - settings_.fixedProbes.size());
+  if (candidates_.size() < 4) return Error{"placement: fewer than 4 valid candidates"};
+  return Status::success();
+}
+
+Status ProbePlacer::bakeTruth() {
+  // The same estimator for candidates and check points, so SH truncation and bias cancel.
+  std::vector<vec3> candidatePositions;
+  for (const Candidate& c : candidates_) candidatePositions.push_back(c.position);
+  candidateBake_ = bake_;
+  candidateBake_.seed = hashValues(settings_.seed, kCandidateTag);
+  {
+    Progress progress("placement candidates", candidatePositions.size(), "probes",
+                      settings_.showProgress);
+    candidateSh_ = bakePointSh(scene_, tracer_, candidatePositions, candidateBake_, &progress,
+                               cancel_, &candidateVisibility_);
+    progress.finish();
+  }
+  if (candidateSh_.empty()) return Error{"cancelled"};
+  ProbeBakeSettings truthBake = bake_;
+  truthBake.seed = hashValues(settings_.seed, kTruthTag);
+  PointSampling sampling;
+  sampling.reachable = reachable_ ? &*reachable_ : nullptr;
+  sampling.objectShare = settings_.floorHeight > 0.0f ? settings_.objectCheckShare : 0.0f;
+  Result<TruthPoints> truth =
+      bakeTruthPoints(scene_, tracer_, volumes_, settings_.checkPoints,
+                      hashValues(settings_.seed, kCheckPointTag), settings_.validity, truthBake,
+                      nullptr, cancel_, sampling);
+  if (!truth) {
+    if (isCancelled()) return Error{"cancelled"};
+    return Error{"placement: check points: " + truth.error()};
+  }
+  checks_ = std::move(truth->points);
+  truth_ = std::move(truth->sh);
+  floor_ = truth->floor;
+  result_.checkPoints = uint32_t(checks_.size());
+  result_.checkPointsAboveFloors =
+      std::min(result_.checkPoints,
+               uint32_t(std::lround(double(settings_.checkPoints) * double(sampling.objectShare))));
+  return Status::success();
+}
+
+// The leak estimate of a set (cellLeakVolumeError summed over the inner cells, divided by the
+// volumes' total): the expected error the check points miss in cells that span walls. Blends
+// as the runtime will: with the candidates' visibility maps when they have them.
+float ProbePlacer::leakOf(const ProbeSet& set, const std::vector<uint32_t>& sel) {
+  if (set.dimension != 3) return 0.0f;
+  std::vector<std::array<uint32_t, 4>> keys(size_t(set.innerCellCount));
+  std::vector<std::array<uint32_t, 4>> missing;
+  for (int32_t c = 0; c < set.innerCellCount; ++c) {
+    const glm::ivec4 cell = set.cells[size_t(c)];
+    std::array<uint32_t, 4> key;
+    for (int v = 0; v < 4; ++v) key[size_t(v)] = sel[size_t(cell[v])];
+    std::sort(key.begin(), key.end());
+    keys[size_t(c)] = key;
+    if (!leakCache_.count(key)) missing.push_back(key);
+  }
+  std::sort(missing.begin(), missing.end());
+  missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+  std::vector<float> computed(missing.size(), 0.0f);
+  ParallelOptions options;
+  options.threads = settings_.threads;
+  options.grain = 16;
+  parallelFor(
+      missing.size(),
+      [&](size_t begin, size_t end) {
+        for (size_t m = begin; m < end; ++m) {
+          std::array<vec3, 4> p;
+          std::array<const ShL2Rgb*, 4> sh;
+          CellProbeMaps maps;
+          maps.resolution = candidateVisibility_.resolution;
+          for (size_t v = 0; v < 4; ++v) {
+            const uint32_t c = missing[m][v];
+            p[v] = candidates_[c].position;
+            sh[v] = &candidateSh_[c];
+            if (maps.resolution > 0) {
+              maps.moments[v] = candidateVisibility_.probe(int32_t(c));
+              maps.maxDistance[v] = candidateVisibility_.maxDistance[c];
+            }
+          }
+          computed[m] = cellLeakVolumeError(tracer_, p, sh, floor_, maps);
+        }
+      },
+      options);
+  for (size_t m = 0; m < missing.size(); ++m) leakCache_[missing[m]] = computed[m];
+  double leak = 0.0;
+  for (const auto& key : keys) leak += leakCache_[key];
+  return float(leak / double(totalVolume_));
+}
+
+Result<ProbeSet> ProbePlacer::topology(const std::vector<uint32_t>& sel) const {
+  std::vector<vec3> pos;
+  pos.reserve(sel.size());
+  for (uint32_t i : sel) pos.push_back(candidates_[i].position);
+  return buildProbeTopology(pos, ProbeTopologySettings{});
+}
+
+std::optional<ProbePlacer::Scored> ProbePlacer::evaluate(const std::vector<uint32_t>& sel) {
+  Result<ProbeSet> set = topology(sel);
+  if (!set) {
+    topologyError_ = set.error();
+    return std::nullopt;
+  }
+  for (size_t k = 0; k < sel.size(); ++k) set->sh[k] = candidateSh_[sel[k]];
+  if (!candidateVisibility_.empty()) {
+    ProbeVisibility& vis = set->visibility;
+    vis.resolution = candidateVisibility_.resolution;
+    vis.maxDistance.reserve(sel.size());
+    vis.moments.reserve(sel.size() * vis.valuesPerProbe());
+    for (uint32_t i : sel) {
+      vis.maxDistance.push_back(candidateVisibility_.maxDistance[i]);
+      const std::span<const uint16_t> m = candidateVisibility_.probe(int32_t(i));
+      vis.moments.insert(vis.moments.end(), m.begin(), m.end());
     }
-    for (size_t k = 0; k < sel.size(); ++k) set->sh[k] = candidateSh[sel[k]];
-    if (!candidateVisibility.empty()) {
-      ProbeVisibility& vis = set->visibility;
-      vis.resolution = candidateVisibility.resolution;
-      vis.maxDistance.reserve(sel.size());
-      vis.moments.reserve(sel.size() * vis.valuesPerProbe());
-      for (uint32_t i : sel) {
-        vis.maxDistance.push_back(candidateVisibility.maxDistance[i]);
-        const std::span<const uint16_t> m = candidateVisibility.probe(int32_t(i));
-        vis.moments.insert(vis.moments.end(), m.begin(), m.end());
+  }
+  Scored out;
+  out.field = measureFieldError(*set, checks_, truth_, floor_, settings_.threads);
+  if (settings_.leakWeight > 0.0f) out.leak = leakOf(*set, sel);
+  out.score = out.field.mean + settings_.leakWeight * out.leak;
+  return out;
+}
+
+// The leak a pick brings: the set's leak with it minus without it (0 when leaks are off).
+std::optional<float> ProbePlacer::leakOfSelection(const std::vector<uint32_t>& sel) {
+  Result<ProbeSet> set = topology(sel);
+  if (!set) return std::nullopt;
+  return leakOf(*set, sel);
+}
+
+// The candidates nearest the cells' centres of a coarse lattice of about `initial` cells (a
+// small uniform grid snapped to valid candidates), with each volume's eight corners as well
+// when `withCorners`. Farthest-point sampling would start from the volumes' corners, all of
+// them against walls.
+std::vector<uint32_t> ProbePlacer::startSet(bool withCorners) const {
+  uint32_t initial = std::max(8u, settings_.budget / 10u);
+  if (!snapshotsLeft_.empty()) initial = std::min(initial, std::max(4u, snapshotsLeft_.front()));
+  initial = std::min({initial, settings_.budget, uint32_t(candidates_.size())});
+  std::vector<uint32_t> sel;
+  std::vector<uint8_t> in(candidates_.size(), 0);
+  const uint32_t fixed = uint32_t(settings_.fixedProbes.size());
+  for (float h = std::cbrt(totalVolume_ / float(initial)); sel.size() < 4; h *= 0.8f) {
+    sel.clear();
+    std::fill(in.begin(), in.end(), 0);
+    for (uint32_t i = 0; i < fixed; ++i) {
+      in[i] = 1;
+      sel.push_back(i);
+    }
+    for (const Bounds3& b : volumes_) {
+      const vec3 e = b.extent();
+      ivec3 n;
+      for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
+      std::vector<vec3> targets;
+      for (int z = 0; z < n.z; ++z)
+        for (int y = 0; y < n.y; ++y)
+          for (int x = 0; x < n.x; ++x)
+            targets.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
+      if (withCorners)
+        for (int k = 0; k < 8; ++k)
+          targets.push_back(b.min + e * vec3(k & 1, (k >> 1) & 1, (k >> 2) & 1));
+      for (const vec3& c : targets) {
+        if (sel.size() >= settings_.budget) break;
+        uint32_t nearest = 0;
+        float nearestDistance = kInfinity;
+        for (uint32_t i = 0; i < candidates_.size(); ++i) {
+          const float d = glm::length(candidates_[i].position - c);
+          if (d < nearestDistance) nearestDistance = d, nearest = i;
+        }
+        if (!in[nearest]) {
+          in[nearest] = 1;
+          sel.push_back(nearest);
+        }
       }
     }
-    Scored out;
-    out.field = measureFieldError(*set, checks, truth, floor, settings.threads);
-    if (settings.leakWeight > 0.0f) out.leak = leakOf(*set, sel);
-    out.score = out.field.mean + settings.leakWeight * out.leak;
-    return out;
-  };
-  // The leak a pick brings: the set's leak with it minus without it (0 when leaks are off).
-  auto leakOfSelection = [&](const std::vector<uint32_t>& sel) -> std::optional<float> {
-    Result<ProbeSet> set = topology(sel);
-    if (!set) return std::nullopt;
-    return leakOf(*set, sel);
-  };
+    if (h < 1e-3f) break;
+  }
+  return sel;
+}
 
-  // Start: the candidates nearest the cells' centres of a coarse lattice of about `initial`
-  // cells (a small uniform grid snapped to valid candidates). Farthest-point sampling would
-  // start from the volumes' corners, all of them against walls.
-  std::vector<uint32_t> snapshotsLeft = settings.snapshotCounts;
-  std::sort(snapshotsLeft.begin(), snapshotsLeft.end());
-  std::vector<uint32_t> snapshotRequested;  // the count each recorded snapshot stands for
-  uint32_t initial = std::max(8u, settings.budget / 10u);
-  if (!snapshotsLeft.empty()) initial = std::min(initial, std::max(4u, snapshotsLeft.front()));
-  initial = std::min({initial, settings.budget, uint32_t(candidates.size())});
-  std::vector<uint32_t> selected;
-  std::vector<uint8_t> inSet(candidates.size(), 0), rejected(candidates.size(), 0);
+Status ProbePlacer::chooseStart() {
+  snapshotsLeft_ = settings_.snapshotCounts;
+  std::sort(snapshotsLeft_.begin(), snapshotsLeft_.end());
+  inSet_.assign(candidates_.size(), 0);
+  rejected_.assign(candidates_.size(), 0);
   // Two start sets, the lattice's cell centres alone and with each volume's eight corners as
   // well; the one with the lower score is kept. The corners put the whole open volume inside
   // the start hull (the courtyard: no extrapolated regions), but in a closed building whose
   // bounds include a thin shell outside its walls they are sunlit probes that leak into the
   // rooms, which the leak estimate sees.
-  auto startSet = [&](bool withCorners) {
-    std::vector<uint32_t> sel;
-    std::vector<uint8_t> in(candidates.size(), 0);
-    for (float h = std::cbrt(totalVolume / float(initial)); sel.size() < 4; h *= 0.8f) {
-      sel.clear();
-      std::fill(in.begin(), in.end(), 0);
-      for (const Bounds3& b : volumes) {
-        const vec3 e = b.extent();
-        ivec3 n;
-        for (int k = 0; k < 3; ++k) n[k] = std::max(1, int(std::lround(e[k] / h)));
-        std::vector<vec3> targets;
-        for (int z = 0; z < n.z; ++z)
-          for (int y = 0; y < n.y; ++y)
-            for (int x = 0; x < n.x; ++x)
-              targets.push_back(b.min + e * (vec3(x, y, z) + 0.5f) / vec3(n));
-        if (withCorners)
-          for (int k = 0; k < 8; ++k)
-            targets.push_back(b.min + e * vec3(k & 1, (k >> 1) & 1, (k >> 2) & 1));
-        for (const vec3& c : targets) {
-          if (sel.size() >= settings.budget) break;
-          uint32_t nearest = 0;
-          float nearestDistance = kInfinity;
-          for (uint32_t i = 0; i < candidates.size(); ++i) {
-            const float d = glm::length(candidates[i].position - c);
-            if (d < nearestDistance) nearestDistance = d, nearest = i;
-          }
-          if (!in[nearest]) {
-            in[nearest] = 1;
-            sel.push_back(nearest);
-          }
-        }
-      }
-      if (h < 1e-3f) break;
-    }
-    return sel;
-  };
-  std::optional<Scored> current;
   for (bool withCorners : {false, true}) {
     std::vector<uint32_t> sel = startSet(withCorners);
-    if (sel.size() < 4 || sel == selected) continue;
+    if (sel.size() < 4 || sel == selected_) continue;
     std::optional<Scored> e = evaluate(sel);
-    if (e && (!current || e->score < current->score)) {
-      current = std::move(e);
-      selected = std::move(sel);
+    if (e && (!current_ || e->score < current_->score)) {
+      current_ = std::move(e);
+      selected_ = std::move(sel);
     }
   }
-  if (selected.size() < 4) return Error{"placement: fewer than 4 distinct start probes"};
-  if (!current) return Error{"placement: " + topologyError};
-  for (uint32_t i : selected) inSet[i] = 1;
-  // Every set the run accepted, by score: the snapshots are the best of at most N probes.
-  std::vector<std::pair<float, std::vector<uint32_t>>> accepted = {{current->score, selected}};
-  result.initialError = current->score;
-  result.errorHistory.push_back(current->score);
-  // Snapshot s, once the growing set has reached s probes: `bestSoFar`, the best-scoring set
-  // of at most s probes.
-  auto takeSnapshots = [&](const std::vector<uint32_t>& bestSoFar) {
-    while (!snapshotsLeft.empty() && selected.size() >= snapshotsLeft.front()) {
-      std::vector<vec3> pos;
-      for (uint32_t i : bestSoFar) pos.push_back(candidates[i].position);
-      result.snapshots.push_back(std::move(pos));
-      result.snapshotCounts.push_back(uint32_t(bestSoFar.size()));
-      snapshotRequested.push_back(snapshotsLeft.front());
-      snapshotsLeft.erase(snapshotsLeft.begin());
-    }
-  };
-  takeSnapshots(selected);
-
-  // The nearest candidate to p not in the set, preferring one that sees p (a probe on the
-  // far side of a wall does not fix the error at p).
-  auto nearestCandidate = [&](vec3 p, const std::vector<uint32_t>& exclude) -> int64_t {
-    std::vector<std::pair<float, uint32_t>> near;
-    for (uint32_t i = 0; i < candidates.size(); ++i) {
-      if (inSet[i] || rejected[i]) continue;
-      if (std::find(exclude.begin(), exclude.end(), i) != exclude.end()) continue;
-      near.push_back({glm::length(candidates[i].position - p), i});
-    }
-    if (near.empty()) return -1;
-    const size_t k = std::min<size_t>(16, near.size());
-    std::partial_sort(near.begin(), near.begin() + ptrdiff_t(k), near.end());
-    for (size_t j = 0; j < k; ++j) {
-      const vec3 q = candidates[near[j].second].position;
-      if (!tracer.occluded(Ray{p, q - p, 1e-4f, 1.0f - 1e-4f})) return near[j].second;
-    }
-    return near[0].second;
-  };
-
-  const float exclusion = 0.5f * spacing;
-  const float reach = settings.candidateReach * spacing;
-  std::vector<uint8_t> spawnedFrom(checks.size(), 0);
+  if (selected_.size() < 4) return Error{"placement: fewer than 4 distinct start probes"};
+  if (!current_) return Error{"placement: " + topologyError_};
+  for (uint32_t i : selected_) inSet_[i] = 1;
+  accepted_ = {{current_->score, selected_}};
+  result_.initialError = current_->score;
+  result_.largestSet = uint32_t(selected_.size());
+  result_.errorHistory.push_back(current_->score);
+  takeSnapshots(selected_);
+  spawnedFrom_.assign(checks_.size(), 0);
   // Growth always adds (one probe rarely helps on its own: it changes the triangulation
   // around it, and the walls between a few probes need several on each side); the best set
   // seen is kept, so the result never has a higher check error than the start.
-  std::vector<uint32_t> bestSelected = selected;
-  Scored best = *current;
-  auto grow = [&]() {
-    while (selected.size() < settings.budget && best.score > settings.targetError &&
-           !isCancelled()) {
-      uint32_t batch = std::max(1u, uint32_t(std::lround(settings.batchFraction *
-                                                          float(selected.size()))));
-      batch = std::min(batch, settings.budget - uint32_t(selected.size()));
-      if (!snapshotsLeft.empty() && snapshotsLeft.front() > selected.size())
-        batch = std::min(batch, snapshotsLeft.front() - uint32_t(selected.size()));
-      std::vector<uint32_t> order(checks.size());
-      std::iota(order.begin(), order.end(), 0u);
-      std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-        return current->field.perPoint[a] > current->field.perPoint[b];
-      });
-      std::vector<uint32_t> picks;
-      std::vector<vec3> pickPositions, spawned;
-      for (uint32_t j : order) {
-        if (picks.size() >= batch || current->field.perPoint[j] <= 0.0f) break;
-        bool covered = false;
-        for (const vec3& q : pickPositions)
-          covered = covered || glm::length(q - checks[j]) < exclusion;
-        if (covered) continue;
-        const int64_t c = nearestCandidate(checks[j], picks);
-        // No candidate near the bad point (open air, where the octree is coarse): a new
-        // probe at the point itself (it is valid: check points are), baked below. Each
-        // check point spawns at most one.
-        if ((c < 0 || glm::length(candidates[size_t(c)].position - checks[j]) > reach) &&
-            !spawnedFrom[j]) {
-          spawnedFrom[j] = 1;
-          picks.push_back(uint32_t(candidates.size() + spawned.size()));
-          spawned.push_back(checks[j]);
-          pickPositions.push_back(checks[j]);
-        } else if (c >= 0) {
-          picks.push_back(uint32_t(c));
-          pickPositions.push_back(candidates[size_t(c)].position);
-        }
-      }
-      if (picks.empty()) break;
-      if (!spawned.empty()) {
-        ProbeBakeSettings spawnBake = candidateBake;
-        spawnBake.seed = hashValues(settings.seed, kSpawnTag, result.rounds);
-        ProbeVisibility spawnedVisibility;
-        const std::vector<ShL2Rgb> sh =
-            bakePointSh(scene, tracer, spawned, spawnBake, nullptr, cancel, &spawnedVisibility);
-        if (sh.empty()) break;  // cancelled
-        for (size_t k = 0; k < spawned.size(); ++k) {
-          candidates.push_back(Candidate{spawned[k], spawned[k], false, ""});
-          candidateSh.push_back(sh[k]);
-          inSet.push_back(0);
-          rejected.push_back(0);
-        }
-        if (!candidateVisibility.empty()) {
-          candidateVisibility.maxDistance.insert(candidateVisibility.maxDistance.end(),
-                                                 spawnedVisibility.maxDistance.begin(),
-                                                 spawnedVisibility.maxDistance.end());
-          candidateVisibility.moments.insert(candidateVisibility.moments.end(),
-                                             spawnedVisibility.moments.begin(),
-                                             spawnedVisibility.moments.end());
-        }
-        result.spawned += uint32_t(spawned.size());
-      }
-      // Leak-aware acceptance: a pick whose own leak (the set's leak with all picks minus
-      // without it) exceeds the mean error share of one probe is dropped. It would bridge a
-      // wall between differently lit sides (e.g. a sunlit probe outside a building joined to
-      // probes in a dark room) for a gain the check points overrate.
-      if (settings.leakWeight > 0.0f && picks.size() > 0) {
-        std::vector<uint32_t> all = selected;
-        all.insert(all.end(), picks.begin(), picks.end());
-        const std::optional<float> with = leakOfSelection(all);
-        const float share = best.score / float(selected.size());
-        std::vector<uint32_t> kept;
-        for (size_t k = 0; with && k < picks.size(); ++k) {
-          std::vector<uint32_t> without = selected;
-          for (size_t m = 0; m < picks.size(); ++m)
-            if (m != k) without.push_back(picks[m]);
-          const std::optional<float> w = leakOfSelection(without);
-          if (w && settings.leakWeight * (*with - *w) > share)
-            rejected[picks[k]] = 1;
-          else
-            kept.push_back(picks[k]);
-        }
-        if (with) {
-          result.leakRejected += uint32_t(picks.size() - kept.size());
-          picks = std::move(kept);
-          if (picks.empty()) continue;
-        }
-      }
-      std::vector<uint32_t> trial = selected;
-      trial.insert(trial.end(), picks.begin(), picks.end());
-      std::optional<Scored> e = evaluate(trial);
-      if (!e) {
-        for (uint32_t c : picks) rejected[c] = 1;  // degenerate topology: try others
-        continue;
-      }
-      for (uint32_t c : picks) inSet[c] = 1;
-      selected = std::move(trial);
-      current = std::move(e);
-      accepted.push_back({current->score, selected});
-      ++result.rounds;
-      if (current->score <= best.score) {
-        best = *current;
-        bestSelected = selected;
-        result.errorHistory.push_back(best.score);
-      }
-      takeSnapshots(bestSelected);
-    }
-    selected = bestSelected;
-    current = best;
-    std::fill(inSet.begin(), inSet.end(), 0);
-    for (uint32_t i : selected) inSet[i] = 1;
-  };
-  grow();
+  bestSelected_ = selected_;
+  best_ = *current_;
+  return Status::success();
+}
 
-  // Prune: try removing the probes that differ least from their neighbours' mean; keep a
-  // removal only when the error does not rise. Then grow again into the freed budget.
-  for (int cycle = 0; settings.prune && cycle < 2 && !isCancelled(); ++cycle) {
-    if (selected.size() <= 5) break;
-    std::vector<std::pair<float, uint32_t>> redundancy;
-    for (size_t k = 0; k < selected.size(); ++k) {
-      const vec3 p = candidates[selected[k]].position;
-      std::vector<std::pair<float, size_t>> near;
-      for (size_t m = 0; m < selected.size(); ++m)
-        if (m != k) near.push_back({glm::length(candidates[selected[m]].position - p), m});
-      const size_t kn = std::min<size_t>(4, near.size());
-      std::partial_sort(near.begin(), near.begin() + ptrdiff_t(kn), near.end());
-      ShL2Rgb mean;
-      for (size_t j = 0; j < kn; ++j) mean += candidateSh[selected[near[j].second]] * (1.0f / kn);
-      redundancy.push_back(
-          {relativeIrradianceError(candidateSh[selected[k]], mean, floor), selected[k]});
-    }
-    std::stable_sort(redundancy.begin(), redundancy.end(),
-                     [](const auto& a, const auto& b) { return a.first < b.first; });
-    const size_t trials = std::min<size_t>(64, selected.size() / 4);
-    uint32_t removed = 0;
-    for (size_t t = 0; t < trials && selected.size() > 5 && !isCancelled(); ++t) {
-      const uint32_t victim = redundancy[t].second;
-      std::vector<uint32_t> trial;
-      for (uint32_t i : selected)
-        if (i != victim) trial.push_back(i);
-      std::optional<Scored> e = evaluate(trial);
-      if (e && e->score <= current->score) {
-        selected = std::move(trial);
-        inSet[victim] = 0;
-        rejected[victim] = 1;  // do not add it straight back
-        current = std::move(e);
-        best = *current;
-        bestSelected = selected;
-        accepted.push_back({current->score, selected});
-        result.errorHistory.push_back(current->score);
-        ++removed;
+// Snapshot s, once the growing set has reached s probes: `bestSoFar`, the best-scoring set
+// of at most s probes.
+void ProbePlacer::takeSnapshots(const std::vector<uint32_t>& bestSoFar) {
+  while (!snapshotsLeft_.empty() && selected_.size() >= snapshotsLeft_.front()) {
+    std::vector<vec3> pos;
+    for (uint32_t i : bestSoFar) pos.push_back(candidates_[i].position);
+    result_.snapshots.push_back(std::move(pos));
+    result_.snapshotCounts.push_back(uint32_t(bestSoFar.size()));
+    snapshotRequested_.push_back(snapshotsLeft_.front());
+    snapshotsLeft_.erase(snapshotsLeft_.begin());
+  }
+}
+
+// The nearest candidate to p not in the set, preferring one that sees p (a probe on the far
+// side of a wall does not fix the error at p).
+int64_t ProbePlacer::nearestCandidate(vec3 p, const std::vector<uint32_t>& exclude) const {
+  std::vector<std::pair<float, uint32_t>> near;
+  for (uint32_t i = 0; i < candidates_.size(); ++i) {
+    if (inSet_[i] || rejected_[i]) continue;
+    if (std::find(exclude.begin(), exclude.end(), i) != exclude.end()) continue;
+    near.push_back({glm::length(candidates_[i].position - p), i});
+  }
+  if (near.empty()) return -1;
+  const size_t k = std::min<size_t>(16, near.size());
+  std::partial_sort(near.begin(), near.begin() + ptrdiff_t(k), near.end());
+  for (size_t j = 0; j < k; ++j) {
+    const vec3 q = candidates_[near[j].second].position;
+    if (!tracer_.occluded(Ray{p, q - p, 1e-4f, 1.0f - 1e-4f})) return near[j].second;
+  }
+  return near[0].second;
+}
+
+// Bakes probes at `spawned` check points and appends them to the candidates; false when
+// cancelled.
+bool ProbePlacer::addSpawned(const std::vector<vec3>& spawned) {
+  ProbeBakeSettings spawnBake = candidateBake_;
+  spawnBake.seed = hashValues(settings_.seed, kSpawnTag, result_.rounds);
+  ProbeVisibility spawnedVisibility;
+  const std::vector<ShL2Rgb> sh =
+      bakePointSh(scene_, tracer_, spawned, spawnBake, nullptr, cancel_, &spawnedVisibility);
+  if (sh.empty()) return false;
+  for (size_t k = 0; k < spawned.size(); ++k) {
+    candidates_.push_back(Candidate{spawned[k], spawned[k], false, ""});
+    candidateSh_.push_back(sh[k]);
+    inSet_.push_back(0);
+    rejected_.push_back(0);
+  }
+  if (!candidateVisibility_.empty()) {
+    candidateVisibility_.maxDistance.insert(candidateVisibility_.maxDistance.end(),
+                                            spawnedVisibility.maxDistance.begin(),
+                                            spawnedVisibility.maxDistance.end());
+    candidateVisibility_.moments.insert(candidateVisibility_.moments.end(),
+                                        spawnedVisibility.moments.begin(),
+                                        spawnedVisibility.moments.end());
+  }
+  result_.spawned += uint32_t(spawned.size());
+  return true;
+}
+
+// Leak-aware acceptance: a pick whose own leak (the set's leak with all picks minus without
+// it) exceeds the mean error share of one probe is dropped for good. It would bridge a wall
+// between differently lit sides (e.g. a sunlit probe outside a building joined to probes in a
+// dark room) for a gain the check points overrate.
+void ProbePlacer::rejectLeakyPicks(std::vector<uint32_t>* picks) {
+  std::vector<uint32_t> all = selected_;
+  all.insert(all.end(), picks->begin(), picks->end());
+  const std::optional<float> with = leakOfSelection(all);
+  const float share = best_.score / float(selected_.size());
+  std::vector<uint32_t> kept;
+  for (size_t k = 0; with && k < picks->size(); ++k) {
+    std::vector<uint32_t> without = selected_;
+    for (size_t m = 0; m < picks->size(); ++m)
+      if (m != k) without.push_back((*picks)[m]);
+    const std::optional<float> w = leakOfSelection(without);
+    if (w && settings_.leakWeight * (*with - *w) > share)
+      rejected_[(*picks)[k]] = 1;
+    else
+      kept.push_back((*picks)[k]);
+  }
+  if (with) {
+    result_.leakRejected += uint32_t(picks->size() - kept.size());
+    *picks = std::move(kept);
+  }
+}
+
+void ProbePlacer::grow() {
+  const float exclusion = 0.5f * spacing_;
+  const float reach = settings_.candidateReach * spacing_;
+  while (selected_.size() < settings_.budget && best_.score > settings_.targetError &&
+         !isCancelled()) {
+    uint32_t batch = std::max(1u, uint32_t(std::lround(settings_.batchFraction *
+                                                        float(selected_.size()))));
+    batch = std::min(batch, settings_.budget - uint32_t(selected_.size()));
+    if (!snapshotsLeft_.empty() && snapshotsLeft_.front() > selected_.size())
+      batch = std::min(batch, snapshotsLeft_.front() - uint32_t(selected_.size()));
+    std::vector<uint32_t> order(checks_.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      return current_->field.perPoint[a] > current_->field.perPoint[b];
+    });
+    std::vector<uint32_t> picks;
+    std::vector<vec3> pickPositions, spawned;
+    for (uint32_t j : order) {
+      if (picks.size() >= batch || current_->field.perPoint[j] <= 0.0f) break;
+      bool covered = false;
+      for (const vec3& q : pickPositions)
+        covered = covered || glm::length(q - checks_[j]) < exclusion;
+      if (covered) continue;
+      const int64_t c = nearestCandidate(checks_[j], picks);
+      // No candidate near the bad point (open air, where the octree is coarse): a new probe
+      // at the point itself (it is valid: check points are), baked below. Each check point
+      // spawns at most one.
+      if ((c < 0 || glm::length(candidates_[size_t(c)].position - checks_[j]) > reach) &&
+          !spawnedFrom_[j]) {
+        spawnedFrom_[j] = 1;
+        picks.push_back(uint32_t(candidates_.size() + spawned.size()));
+        spawned.push_back(checks_[j]);
+        pickPositions.push_back(checks_[j]);
+      } else if (c >= 0) {
+        picks.push_back(uint32_t(c));
+        pickPositions.push_back(candidates_[size_t(c)].position);
       }
     }
-    result.pruned += removed;
-    if (removed == 0) break;
-    grow();
+    if (picks.empty()) {
+      ranOutOfPicks_ = true;
+      break;
+    }
+    if (!spawned.empty() && !addSpawned(spawned)) break;  // cancelled
+    if (settings_.leakWeight > 0.0f && picks.size() > 0) {
+      rejectLeakyPicks(&picks);
+      if (picks.empty()) continue;
+    }
+    std::vector<uint32_t> trial = selected_;
+    trial.insert(trial.end(), picks.begin(), picks.end());
+    std::optional<Scored> e = evaluate(trial);
+    if (!e) {
+      for (uint32_t c : picks) rejected_[c] = 1;  // degenerate topology: try others
+      continue;
+    }
+    for (uint32_t c : picks) inSet_[c] = 1;
+    selected_ = std::move(trial);
+    current_ = std::move(e);
+    accepted_.push_back({current_->score, selected_});
+    result_.largestSet = std::max(result_.largestSet, uint32_t(selected_.size()));
+    ++result_.rounds;
+    if (current_->score <= best_.score) {
+      best_ = *current_;
+      bestSelected_ = selected_;
+      result_.errorHistory.push_back(best_.score);
+    }
+    takeSnapshots(bestSelected_);
   }
-  if (isCancelled()) return Error{"cancelled"};
-  // Snapshot s: the lowest-score set of at most s probes accepted at any point of the run
-  // (growth, pruning, regrowth).
-  for (size_t k = 0; k < result.snapshotCounts.size(); ++k) {
-    const uint32_t limit = snapshotRequested[k];
+  keepBest();
+}
+
+// Back to the best-scoring set seen.
+void ProbePlacer::keepBest() {
+  selected_ = bestSelected_;
+  current_ = best_;
+  std::fill(inSet_.begin(), inSet_.end(), 0);
+  for (uint32_t i : selected_) inSet_[i] = 1;
+}
+
+// Tries removing the probes that differ least from their four nearest neighbours' mean;
+// keeps a removal only when the score does not rise.
+bool ProbePlacer::prune() {
+  if (selected_.size() <= 5) return false;
+  std::vector<std::pair<float, uint32_t>> redundancy;
+  for (size_t k = 0; k < selected_.size(); ++k) {
+    if (candidates_[selected_[k]].fixed) continue;  // the user's: kept
+    const vec3 p = candidates_[selected_[k]].position;
+    std::vector<std::pair<float, size_t>> near;
+    for (size_t m = 0; m < selected_.size(); ++m)
+      if (m != k) near.push_back({glm::length(candidates_[selected_[m]].position - p), m});
+    const size_t kn = std::min<size_t>(4, near.size());
+    std::partial_sort(near.begin(), near.begin() + ptrdiff_t(kn), near.end());
+    ShL2Rgb mean;
+    for (size_t j = 0; j < kn; ++j) mean += candidateSh_[selected_[near[j].second]] * (1.0f / kn);
+    redundancy.push_back(
+        {relativeIrradianceError(candidateSh_[selected_[k]], mean, floor_), selected_[k]});
+  }
+  std::stable_sort(redundancy.begin(), redundancy.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  const size_t trials = std::min<size_t>({64, selected_.size() / 4, redundancy.size()});
+  uint32_t removed = 0;
+  for (size_t t = 0; t < trials && selected_.size() > 5 && !isCancelled(); ++t) {
+    const uint32_t victim = redundancy[t].second;
+    std::vector<uint32_t> trial;
+    for (uint32_t i : selected_)
+      if (i != victim) trial.push_back(i);
+    std::optional<Scored> e = evaluate(trial);
+    if (e && e->score <= current_->score) {
+      selected_ = std::move(trial);
+      inSet_[victim] = 0;
+      rejected_[victim] = 1;  // do not add it straight back
+      current_ = std::move(e);
+      best_ = *current_;
+      bestSelected_ = selected_;
+      accepted_.push_back({current_->score, selected_});
+      result_.errorHistory.push_back(current_->score);
+      ++removed;
+    }
+  }
+  result_.pruned += removed;
+  return removed > 0;
+}
+
+// Snapshot s: the lowest-score set of at most s probes accepted at any point of the run
+// (growth, pruning, regrowth).
+void ProbePlacer::finishSnapshots() {
+  for (size_t k = 0; k < result_.snapshotCounts.size(); ++k) {
+    const uint32_t limit = snapshotRequested_[k];
     const std::vector<uint32_t>* bestSet = nullptr;
     float bestScore = kInfinity;
-    for (const auto& [score, set] : accepted)
+    for (const auto& [score, set] : accepted_)
       if (set.size() <= limit && score < bestScore) bestScore = score, bestSet = &set;
     if (!bestSet) continue;
     std::vector<vec3> pos;
-    for (uint32_t i : *bestSet) pos.push_back(candidates[i].position);
-    result.snapshots[k] = std::move(pos);
-    result.snapshotCounts[k] = uint32_t(bestSet->size());
+    for (uint32_t i : *bestSet) pos.push_back(candidates_[i].position);
+    result_.snapshots[k] = std::move(pos);
+    result_.snapshotCounts[k] = uint32_t(bestSet->size());
   }
+}
 
-  result.estimatedError = current->score;
-  result.estimatedLeak = current->leak;
-  result.estimatedError95 = current->field.p95;
-  std::sort(selected.begin(), selected.end());
-  for (uint32_t i : selected) {
-    const Candidate& c = candidates[i];
-    result.probes.push_back(PlacedProbe{c.position, c.original, c.moved, c.why});
+ProbePlacement ProbePlacer::finish() {
+  // Fewer than 90% of the budget: say why (the CLI warns with it).
+  if (uint64_t(selected_.size()) * 10 < uint64_t(settings_.budget) * 9) {
+    std::ostringstream why;
+    why << selected_.size() << " of " << settings_.budget << " probes: ";
+    if (best_.score <= settings_.targetError) {
+      why << "the target error " << settings_.targetError << " was reached";
+    } else if (result_.largestSet < uint64_t(settings_.budget) * 9 / 10 && ranOutOfPicks_) {
+      why << "no free candidate was left near the worst check points (" << result_.candidates
+          << " candidates, " << result_.leakRejected
+          << " picks dropped for leaks); more candidates (--depth, --spacing) would help";
+    } else {
+      why << "the best-scoring set is smaller: sets of up to " << result_.largestSet
+          << " probes scored worse at the check points (mean error + leak " << best_.score
+          << " at " << selected_.size()
+          << "); the cheap bakes' noise can outweigh what more probes add (--rays, "
+             "--check-points)";
+    }
+    result_.belowBudget = why.str();
   }
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return result;
+  result_.estimatedError = current_->score;
+  result_.estimatedLeak = current_->leak;
+  result_.estimatedError95 = current_->field.p95;
+  std::sort(selected_.begin(), selected_.end());
+  for (uint32_t i : selected_) {
+    const Candidate& c = candidates_[i];
+    result_.probes.push_back(PlacedProbe{c.position, c.original, c.moved, c.fixed, c.why});
+  }
+  result_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return std::move(result_);
+}
+
+}  // namespace
+
+Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
+                                   const ProbePlacementSettings& settings,
+                                   const std::atomic<bool>* cancel) {
+  return ProbePlacer(scene, tracer, settings, cancel).run();
 }
 
 }  // namespace kiln

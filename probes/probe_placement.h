@@ -103,10 +103,20 @@ std::vector<Bounds3> placementVolumes(const Scene& scene, std::span<const Bounds
 // `count` random valid points, uniform over the volumes (by volume), rejection-sampled (no
 // relocation). Deterministic for a seed at any thread count. Fewer points come back only when
 // the volumes are almost entirely invalid.
+// `accept`, when given, must also hold for a point (e.g. ReachableSpace::reachable).
 std::vector<vec3> randomValidPoints(const Scene& scene, const Tracer& tracer,
                                     std::span<const Bounds3> volumes, uint32_t count,
                                     uint64_t seed, const ProbeValiditySettings& validity,
-                                    int threads = 0);
+                                    int threads = 0,
+                                    const std::function<bool(vec3)>& accept = {});
+
+// Rejection sampling in parallel: point i is the first of 256 attempts for which
+// draw(i, attempt) gives a point; points whose attempts all fail are left out; the rest in
+// index order. `draw` must be thread-safe and a function of (i, attempt) only, so that the
+// result is the same at any thread count.
+std::vector<vec3> rejectionSamplePoints(
+    uint32_t count, int threads,
+    const std::function<std::optional<vec3>(size_t i, uint32_t attempt)>& draw);
 
 // A uniform grid baseline with exactly `count` probes (or an error): the lattice spacing is
 // searched so that, after the same relocation as automatic placement (Unity APV also moves
@@ -148,6 +158,20 @@ struct ProbePlacementSettings {
   // that many probes accepted anywhere in the run (growth, pruning, regrowth): one run yields
   // the error-versus-count curve. Growth batches stop at these counts.
   std::vector<uint32_t> snapshotCounts;
+  // Where objects go (probes/object_space.h). reachableOnly: candidates, check points and
+  // spawned probes only in space a flood fill reaches from the sky, a punctual light, a
+  // camera or a fixed probe (no probe in sealed cavities).
+  bool reachableOnly = true;
+  // Candidates above walkable surfaces (upward-facing static geometry), on columns half a
+  // base spacing apart, the first layer this high above the floor (m), then sparser layers
+  // up through the volume (pointsAboveFloors); 0 = octree corners only.
+  float floorHeight = 0.4f;
+  // Share of the check points drawn where objects stand (0.3-2 m above a walkable surface,
+  // objectPoint); the rest are uniform over the (reachable) volumes.
+  float objectCheckShare = 0.5f;
+  // Fixed probes (the scene's probe groups, extras.kiln.probes, in the CLI): in every set,
+  // never pruned, counted in the budget, kept where they are (no relocation).
+  std::vector<vec3> fixedProbes;
   uint64_t seed = 0;
   // Integrator settings of the cheap bakes (rays are candidateRays). bake.visibilityResolution
   // (default kDefaultVisibilityResolution, as bakeProbes) > 0: every candidate and spawned probe also records a
@@ -164,6 +188,7 @@ struct PlacedProbe {
   vec3 position{0.0f};
   vec3 candidate{0.0f};  // where the candidate was before relocation
   bool moved = false;
+  bool fixed = false;  // one of ProbePlacementSettings::fixedProbes
   std::string why;  // what relocation did ("" = untouched)
 };
 
@@ -175,7 +200,12 @@ struct ProbePlacement {
   uint32_t candidates = 0;          // after validity
   uint32_t candidatesMoved = 0;     // relocated candidates
   uint32_t candidatesDropped = 0;   // invalid and not relocatable
+  uint32_t candidatesUnreachable = 0;  // valid but in sealed space (reachableOnly)
+  uint32_t candidatesAboveFloors = 0;  // of `candidates`, from pointsAboveFloors
+  uint32_t fixedProbes = 0;         // settings.fixedProbes, all in `probes`
+  uint32_t reachableCells = 0, gridCells = 0;  // the flood fill (0 when off or no seed)
   uint32_t checkPoints = 0;
+  uint32_t checkPointsAboveFloors = 0;  // of checkPoints, where objects stand
   uint32_t spawned = 0;             // probes added at check points (no candidate near)
   float initialError = 0.0f;        // score (mean check error + leak) of the first set
   float estimatedError = 0.0f;      // ... final set (check mean + leakWeight x leak)
@@ -184,6 +214,10 @@ struct ProbePlacement {
   std::vector<float> errorHistory;  // mean check error after every accepted step
   uint32_t rounds = 0, pruned = 0;
   uint32_t leakRejected = 0;  // picks dropped for the leak they would bring
+  uint32_t largestSet = 0;    // most probes any set of the run held
+  // Why the result holds fewer than 90% of the budget ("" when it does not): the target
+  // error was reached, no candidate was left to add, or larger sets scored worse.
+  std::string belowBudget;
   double seconds = 0.0;
   std::vector<vec3> positions() const;
 };

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 # make_scenes.py: writes the glTF 2.0 test scenes that kiln ships (cornell_box, two_rooms,
-# two_rooms_thin, courtyard; see docs/scenes.md) and validates them. Python 3 standard
+# two_rooms_thin, courtyard, atrium; see docs/scenes.md) and validates them. Python 3 standard
 # library only.
 #
 #   python3 tools/make_scenes.py [--out DIR]          write the scenes (default: tools/scenes),
@@ -205,6 +205,16 @@ class MeshBuilder:
 
     def box(self, lo, hi, material, tag="box"):
         self.slab("x", (lo[0], hi[0]), (lo[1], hi[1]), (lo[2], hi[2]), material, tag=tag)
+
+    def cavity(self, lo, hi, material, tag="cavity"):
+        """A sealed void: a box whose faces point into it (to be put inside a solid). Rays
+        from inside see only front faces, so a ray test alone takes the void for open space."""
+        first = len(self.faces)
+        self.box(lo, hi, material, tag=tag)
+        for f in self.faces[first:]:
+            f.pts = f.pts[::-1]
+            if f.uv0 is not None:
+                f.uv0 = f.uv0[::-1]
 
     def prism(self, center, radius, y0, y1, sides, material):
         """A closed vertical prism (a faceted cylinder), faces outward."""
@@ -932,8 +942,86 @@ def courtyard(out_dir):
                                "bounces": 2}}, "kiln tools/make_scenes.py")
     return g
 
+# The atrium (Crytek Sponza's case, docs/scenes.md): an open court under the sky between two
+# arcaded galleries on two floors, a roof over the galleries only, thick outer walls with
+# sealed cavities inside them. The court is x in [-5, 5], z in [-2.5, 2.5]; the galleries
+# z in [2.5, 5] and [-5, -2.5], floors at y = 0 and 4.3; the roof at y = 8.
+AT_SUN = sun_direction(60.0, 30.0)
+AT_CAVITIES = [  # (lo, hi) of the sealed voids inside the outer walls
+    ((-4.5, 0.5, 5.3), (4.5, 7.5, 5.9)),
+    ((-4.5, 0.5, -5.9), (4.5, 7.5, -5.3)),
+    ((5.3, 0.5, -4.5), (5.9, 9.0, 4.5)),
+    ((-5.9, 0.5, -4.5), (-5.3, 9.0, 4.5)),
+]
 
-SCENES = ("cornell_box", "two_rooms", "two_rooms_thin", "courtyard")
+
+def atrium(out_dir):
+    g = Gltf("atrium")
+    g.material("stone", (0.62, 0.58, 0.5))
+    g.material("floor_stone", (0.5, 0.47, 0.42))
+    g.material("plaster", (0.7, 0.68, 0.62))
+    g.material("roof_tiles", (0.45, 0.25, 0.18))
+
+    mb = MeshBuilder("ground")
+    mb.box((-6.3, -0.3, -6.3), (6.3, 0.0, 6.3), "floor_stone")
+    g.node("ground", mb)
+    # Outer walls, 1.2 m thick, each with a sealed cavity inside; the long walls end at the
+    # roof, the end walls rise above it.
+    walls = [("wall_north", (-6.2, -0.1, 5.0), (6.2, 8.6, 6.2), 0),
+             ("wall_south", (-6.2, -0.1, -6.2), (6.2, 8.6, -5.0), 1),
+             ("wall_east", (5.0, -0.1, -5.1), (6.2, 10.0, 5.1), 2),
+             ("wall_west", (-6.2, -0.1, -5.1), (-5.0, 10.0, 5.1), 3)]
+    for name, lo, hi, k in walls:
+        mb = MeshBuilder(name)
+        mb.box(lo, hi, "plaster")
+        mb.cavity(AT_CAVITIES[k][0], AT_CAVITIES[k][1], "plaster")
+        g.node(name, mb)
+    # Galleries on both long sides: the first floor's slab, the roof, and the arcades (piers
+    # on both floors, a parapet between the upper piers).
+    piers = (-3.75, -1.25, 1.25, 3.75)
+    for side, sgn in (("north", 1.0), ("south", -1.0)):
+        def zr(a, b):
+            return (min(sgn * a, sgn * b), max(sgn * a, sgn * b))
+        z_slab = zr(2.5, 5.1)
+        mb = MeshBuilder("gallery_floor_" + side)
+        mb.box((-5.1, 4.0, z_slab[0]), (5.1, 4.3, z_slab[1]), "stone")
+        g.node("gallery_floor_" + side, mb)
+        mb = MeshBuilder("roof_" + side)
+        mb.box((-5.1, 8.0, z_slab[0]), (5.1, 8.3, z_slab[1]), "roof_tiles")
+        g.node("roof_" + side, mb)
+        z_pier = zr(2.5, 3.0)
+        for k, x in enumerate(piers):
+            mb = MeshBuilder("pier_%s_%d" % (side, k + 1))
+            mb.box((x - 0.25, -0.1, z_pier[0]), (x + 0.25, 4.1, z_pier[1]), "stone")
+            g.node("pier_%s_%d" % (side, k + 1), mb)
+            mb = MeshBuilder("pier_%s_upper_%d" % (side, k + 1))
+            mb.box((x - 0.25, 4.2, z_pier[0]), (x + 0.25, 8.1, z_pier[1]), "stone")
+            g.node("pier_%s_upper_%d" % (side, k + 1), mb)
+        z_par = zr(2.55, 2.95)
+        ends = [-5.1] + [c for x in piers for c in (x - 0.3, x + 0.3)] + [5.1]
+        for k in range(0, len(ends), 2):
+            mb = MeshBuilder("parapet_%s_%d" % (side, k // 2 + 1))
+            mb.box((ends[k], 4.2, z_par[0]), (ends[k + 1], 5.2, z_par[1]), "stone")
+            g.node("parapet_%s_%d" % (side, k // 2 + 1), mb)
+
+    # Eight hand-placed probes (the user's group): the court at 1 m and the upper galleries.
+    probes = [(x, 1.0, z) for x in (-2.5, 2.5) for z in (-1.2, 1.2)] + \
+             [(x, 5.3, z) for x in (-2.5, 2.5) for z in (-4.0, 4.0)]
+    origin = (0.0, 3.0, 0.0)
+    g.node("probe_group", translation=origin,
+           extras={"kiln": {"probes": [[rnd(c, 6) for c in vsub(p, origin)] for p in probes]}})
+    g.node("sun", rotation=look_rotation(AT_SUN),
+           light={"name": "sun", "type": "directional", "color": [1.0, 0.95, 0.85],
+                  "intensity": 8.0, "extras": {"kiln": {"mode": "baked", "shadowAngle": 0.5}}})
+    g.node("camera", translation=(-4.0, 1.7, 0.0),
+           rotation=look_rotation(vsub((4.0, 3.0, 1.0), (-4.0, 1.7, 0.0))),
+           camera=perspective(math.radians(70.0), 16.0 / 9.0))
+    g.write(out_dir, {"kiln": {"sky": {"color": [0.3, 0.4, 0.6]}, "lightmapResolution": 2.0,
+                               "bounces": 2}}, "kiln tools/make_scenes.py")
+    return g
+
+
+SCENES = ("cornell_box", "two_rooms", "two_rooms_thin", "courtyard", "atrium")
 
 
 # ----------------------------------------------------------------------------- --check
@@ -1248,6 +1336,7 @@ def main():
         two_rooms(args.out)
         two_rooms(args.out, "two_rooms_thin", TR_THIN)
         courtyard(args.out)
+        atrium(args.out)
     failed = False
     for name in SCENES:
         path = os.path.join(args.out, name + ".gltf")

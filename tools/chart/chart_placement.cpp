@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "probes/octree_placement.h"
+#include "probes/placement_evaluation.h"
 #include "probes/probe_baker.h"
 #include "probes/probe_placement.h"
 #include "src/gltf_loader.h"
@@ -56,23 +57,22 @@ Result<ChartTable> probePlacementChart(const ChartOptions& o) {
   Progress progress("chart placement", steps, "steps", o.progress);
 
   // Evaluation points and their truth: random valid points (a seed apart from placement's
-  // check points), SH baked directly there with the probe bake's estimator.
+  // check points), SH baked directly there with the probe bake's estimator: the harness
+  // compare-placement uses (placement_evaluation.h).
   const uint64_t evalSeed = hashValues(o.seed, kEvalTag);
-  const std::vector<vec3> points = randomValidPoints(scene, tracer, volumes, pointCount, evalSeed,
-                                                     place.validity, o.threads);
   ProbeBakeSettings bake;
   bake.rays = evalRays;
   bake.seed = evalSeed;
   bake.threads = o.threads;
   bake.dering = false;  // the truth is not deringed either: compare like with like
   bake.fillInvalid = false;
-  const std::vector<ShL2Rgb> truth = bakePointSh(scene, tracer, points, bake, nullptr, o.cancel);
-  if (truth.empty() || (o.cancel && o.cancel->load())) return Error{"cancelled"};
+  Result<TruthPoints> truth = bakeTruthPoints(scene, tracer, volumes, pointCount, evalSeed,
+                                              place.validity, bake, nullptr, o.cancel);
+  if (o.cancel && o.cancel->load()) return Error{"cancelled"};
+  if (!truth) return Error{path + ": evaluation points: " + truth.error()};
   progress.advance();
-  double meanRms = 0.0;
-  for (const ShL2Rgb& sh : truth) meanRms += irradianceRms(sh);
-  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
   bake.seed = o.seed;
+  const PlacementEvaluation evaluation(scene, tracer, *truth, bake);
 
   ChartTable t;
   t.name = "probe_placement";
@@ -81,10 +81,10 @@ Result<ChartTable> probePlacementChart(const ChartOptions& o) {
                "setting"};
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds, const std::string& setting) -> Status {
-    Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, o.cancel);
+    Result<ProbeSetError> measured = evaluation.measure(positions, o.cancel);
     progress.advance();
-    if (!set) return Error{path + ": " + method + " (" + setting + "): " + set.error()};
-    const FieldError e = measureFieldError(*set, points, truth, floor, o.threads);
+    if (!measured) return Error{path + ": " + method + " (" + setting + "): " + measured.error()};
+    const FieldError& e = measured->visibility;
     t.addRow({method, std::to_string(positions.size()), num(e.mean), num(e.p95), num(e.max),
               num(seconds), setting});
     return Status::success();
@@ -146,7 +146,7 @@ Result<ChartTable> probePlacementChart(const ChartOptions& o) {
   t.notes.push_back(
       "error: probe_placement.h relativeIrradianceError (RMS over the 6 axis normals of the "
       "luminance error of E, over max(RMS of the true E, 5% of the mean)) at " +
-      std::to_string(points.size()) +
+      std::to_string(truth->points.size()) +
       " random valid points (seed hash(seed, 'eval')); truth = SH baked at each point, probes "
       "baked with bakeProbes, both " + std::to_string(evalRays) + " rays, no deringing");
   t.notes.push_back("methods: automatic = placeProbes (budget " + std::to_string(place.budget) +

@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "probes/octree_placement.h"
+#include "probes/placement_evaluation.h"
 #include "probes/probe_baker.h"
 #include "probes/probe_placement.h"
 #include "src/progress.h"
@@ -65,6 +66,8 @@ struct CommonOptions {
   float spacing = 0.0f;
   int depth = 2;
   float leakWeight = 1.0f;
+  float floorHeight = 0.4f;
+  bool noSceneProbes = false;
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = score the plain blend
   uint64_t seed = 0;
   int threads = 0;
@@ -89,6 +92,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
   s->spacing = o.spacing;
   s->maxDepth = o.depth;
   s->leakWeight = o.leakWeight;
+  s->floorHeight = o.floorHeight;
   s->bake.visibilityResolution = o.visibilityResolution;
   s->seed = o.seed;
   s->threads = o.threads;
@@ -125,6 +129,14 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
                 "probes baked without visibility)")
       ->check(visibilityResolutionValidator("plain blend"))
       ->capture_default_str();
+  c->add_option("--floor-height", o->floorHeight,
+                "Height (m) of the first layer of candidates above walkable surfaces, with "
+                "sparser layers above it (0 = octree corners only)")
+      ->check(CLI::Range(0.0f, 100.0f))
+      ->capture_default_str();
+  c->add_flag("--no-scene-probes", o->noSceneProbes,
+              "Ignore the scene's probe groups (extras.kiln.probes); by default they are fixed "
+              "probes that placement builds around");
   c->add_option("--seed", o->seed, "Seed of every random number")->capture_default_str();
   c->add_option("--threads", o->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber);
@@ -152,6 +164,11 @@ int loadTraced(const CommonOptions& o, LoadedScene* out) {
   return kExitOk;
 }
 
+// The scene's probe groups as fixed probes, unless --no-scene-probes.
+void addSceneProbes(const CommonOptions& o, const Scene& scene, ProbePlacementSettings* s) {
+  if (!o.noSceneProbes) s->fixedProbes = sceneProbePositions(scene);
+}
+
 // ---- place ---------------------------------------------------------------------------------
 
 struct PlaceOptions {
@@ -172,15 +189,19 @@ int runPlace(const PlaceOptions& o) {
   if (int code = checkOutputFile("--out", o.out)) return code;
   LoadedScene ls;
   if (int code = loadTraced(o.common, &ls)) return code;
+  addSceneProbes(o.common, ls.scene, &settings);
   Result<ProbePlacement> placed = placeProbes(ls.scene, *ls.tracer, settings, &cancelFlag());
   if (cancelFlag().load()) return reportInterrupted(o.out);
   if (!placed) {
     printError(o.common.scene + ": " + placed.error());
     return kExitBadInput;
   }
-  Json positions = Json::array(), probes = Json::array();
+  // "positions" leaves the scene's own probes out: `kiln probes bake` adds them itself
+  // (unless --no-scene-probes); "fixedPositions" lists them.
+  Json positions = Json::array(), fixedPositions = Json::array(), probes = Json::array();
   for (const PlacedProbe& p : placed->probes) {
-    positions.push_back(vecJson(p.position));
+    (p.fixed ? fixedPositions : positions).push_back(vecJson(p.position));
+    if (p.fixed) continue;
     Json note = {{"position", vecJson(p.position)}, {"moved", p.moved}};
     if (p.moved) {
       note["candidate"] = vecJson(p.candidate);
@@ -189,13 +210,22 @@ int runPlace(const PlaceOptions& o) {
     probes.push_back(note);
   }
   Json doc = {{"positions", positions},
+              {"fixedPositions", fixedPositions},
               {"probes", probes},
               {"report",
                {{"probeCount", placed->probes.size()},
+                {"budget", settings.budget},
+                {"belowBudget", placed->belowBudget},
+                {"fixedProbes", placed->fixedProbes},
                 {"candidates", placed->candidates},
                 {"candidatesMoved", placed->candidatesMoved},
                 {"candidatesDropped", placed->candidatesDropped},
+                {"candidatesUnreachable", placed->candidatesUnreachable},
+                {"candidatesAboveFloors", placed->candidatesAboveFloors},
+                {"reachableCells", placed->reachableCells},
+                {"gridCells", placed->gridCells},
                 {"checkPoints", placed->checkPoints},
+                {"checkPointsAboveFloors", placed->checkPointsAboveFloors},
                 {"visibilityResolution", settings.bake.visibilityResolution},
                 {"spawned", placed->spawned},
                 {"initialError", placed->initialError},
@@ -210,11 +240,18 @@ int runPlace(const PlaceOptions& o) {
     printError(s.error());
     return kExitBadInput;
   }
+  // Far below the budget is worth a warning even with --quiet: the user asked for more.
+  if (!placed->belowBudget.empty())
+    std::cerr << "kiln: warning: " << o.common.scene << ": placed " << placed->belowBudget
+              << "\n";
   if (!o.common.quiet) {
-    std::cerr << "kiln: wrote " << o.out << ": " << placed->probes.size() << " probes from "
-              << placed->candidates << " valid candidates (" << placed->candidatesMoved
+    std::cerr << "kiln: wrote " << o.out << ": " << placed->probes.size() << " probes ("
+              << placed->fixedProbes << " fixed from the scene's probe groups) from "
+              << placed->candidates << " valid candidates (" << placed->candidatesAboveFloors
+              << " above walkable surfaces; " << placed->candidatesMoved
               << " moved out of or away from geometry, " << placed->candidatesDropped
-              << " dropped; " << placed->spawned
+              << " dropped, " << placed->candidatesUnreachable << " in sealed space; "
+              << placed->spawned
               << " probes added at check points); estimated score (mean relative irradiance "
               << "error + leak estimate, "
               << (settings.bake.visibilityResolution > 0 ? "visibility-weighted" : "plain")
@@ -236,6 +273,7 @@ struct CompareOptions {
   int count = 256;
   int points = 1000;
   int evalRays = 4096;
+  int objectPoints = 0;  // points where objects stand, for the sphere measure (0 = off)
   std::optional<uint64_t> evalSeed;  // default: derived from --seed
   std::string csv, pointsCsv;
 };
@@ -248,6 +286,7 @@ struct Row {
   float nearWall = 0.0f;  // mean over points within 0.5 m of a surface (visibility)
   float nearWallPlain = 0.0f;
   CellCrossing crossing;
+  std::optional<SphereError> spheres;  // at the object points (--object-points)
   double seconds = 0.0;
 };
 
@@ -280,79 +319,99 @@ int runCompare(const CompareOptions& o) {
   if (int code = loadTraced(o.common, &ls)) return code;
   const Scene& scene = ls.scene;
   const Tracer& tracer = *ls.tracer;
+  addSceneProbes(o.common, scene, &settings);
   const std::vector<Bounds3> volumes = placementVolumes(scene, settings.volumes);
+  // Evaluation points only where objects can go: not in sealed cavities.
+  ReachableSpaceSettings reachableSettings;
+  reachableSettings.seeds = settings.fixedProbes;
+  reachableSettings.threads = o.common.threads;
+  const ReachableSpace reachable =
+      ReachableSpace::build(scene, tracer, volumes, reachableSettings, &cancelFlag());
+  if (cancelFlag().load()) return reportInterrupted("outputs");
+  PointSampling sampling;
+  sampling.reachable = &reachable;
 
   // Evaluation points and their ground truth: a different seed from placement's check points.
   const uint64_t evalSeed =
       hashValues(o.evalSeed ? *o.evalSeed : o.common.seed, 0x6576616cULL);  // "eval"
-  const std::vector<vec3> points = randomValidPoints(scene, tracer, volumes, uint32_t(o.points),
-                                                     evalSeed, settings.validity, o.common.threads);
   ProbeBakeSettings bake;
   bake.rays = uint32_t(o.evalRays);
   bake.seed = evalSeed;
   bake.threads = o.common.threads;
   bake.dering = false;  // the truth is not deringed either: compare like with like
   bake.fillInvalid = false;
-  std::vector<ShL2Rgb> truth;
-  {
-    Progress progress("truth", points.size(), "points", !o.common.quiet);
-    truth = bakePointSh(scene, tracer, points, bake, &progress, &cancelFlag());
+  Result<TruthPoints> truth = [&] {
+    Progress progress("truth", uint32_t(o.points), "points", !o.common.quiet);
+    Result<TruthPoints> t = bakeTruthPoints(scene, tracer, volumes, uint32_t(o.points), evalSeed,
+                                            settings.validity, bake, &progress, &cancelFlag(),
+                                            sampling);
     progress.finish();
+    return t;
+  }();
+  if (cancelFlag().load()) return reportInterrupted("outputs");
+  if (!truth) {
+    printError(o.common.scene + ": evaluation points: " + truth.error());
+    return kExitBadInput;
   }
-  if (truth.empty() || cancelFlag().load()) return reportInterrupted("outputs");
-  double meanRms = 0.0;
-  for (const ShL2Rgb& t : truth) meanRms += irradianceRms(t);
-  const float floor = float(kErrorFloorFraction * meanRms / double(truth.size()));
-  // The measure's noise: a second bake of the points with another seed against the truth.
-  // Probes have the same noise (same rays), so no method can score much below this (a blend
-  // of four probes averages theirs down to between 1/sqrt(2) and 1 times it).
-  std::vector<ShL2Rgb> rebaked;
-  {
-    ProbeBakeSettings again = bake;
-    again.seed = hashValues(evalSeed, 0x6e6f697365ULL);  // "noise"
-    Progress progress("noise", points.size(), "points", !o.common.quiet);
-    rebaked = bakePointSh(scene, tracer, points, again, &progress, &cancelFlag());
+  const std::vector<vec3>& points = truth->points;
+  // Where objects stand (0.3-2 m above walkable surfaces): spheres lit by each method's probes
+  // against SH baked at their centres.
+  std::optional<TruthPoints> objectTruth;
+  if (o.objectPoints > 0) {
+    PointSampling objects = sampling;
+    objects.objectShare = 1.0f;
+    const uint64_t objectSeed = hashValues(evalSeed, 0x6f626aULL);  // "obj"
+    ProbeBakeSettings objectBake = bake;
+    objectBake.seed = objectSeed;
+    Progress progress("object points", uint32_t(o.objectPoints), "points", !o.common.quiet);
+    Result<TruthPoints> t =
+        bakeTruthPoints(scene, tracer, volumes, uint32_t(o.objectPoints), objectSeed,
+                        settings.validity, objectBake, &progress, &cancelFlag(), objects);
     progress.finish();
+    if (cancelFlag().load()) return reportInterrupted("outputs");
+    if (!t) {
+      printError(o.common.scene + ": object points: " + t.error());
+      return kExitBadInput;
+    }
+    objectTruth = std::move(*t);
   }
-  if (rebaked.empty() || cancelFlag().load()) return reportInterrupted("outputs");
-  std::vector<float> noiseErrors(points.size());
-  for (size_t i = 0; i < points.size(); ++i)
-    noiseErrors[i] = relativeIrradianceError(truth[i], rebaked[i], floor);
-  const FieldError noise = summarizeFieldError(std::move(noiseErrors));
-  std::vector<uint8_t> nearWall(points.size());
-  for (size_t i = 0; i < points.size(); ++i)
-    nearWall[i] = probePoint(scene, tracer, points[i], 256).nearestDistance < 0.5f;
 
   // Every method's probes are baked once, with visibility maps as `kiln probes bake` makes
   // them (per-probe maxDistance to the scene's farthest corner), and measured with both blends.
-  bake.seed = o.common.seed;
-  bake.visibilityResolution = o.common.visibilityResolution > 0 ? o.common.visibilityResolution
-                                                                 : kDefaultVisibilityResolution;
-  ProbeBlendSettings plainBlend;
-  plainBlend.visibility = false;
-  // Mean of per-point errors over the points within 0.5 m of a surface.
-  auto nearWallMean = [&](const std::vector<float>& perPoint) {
-    double sum = 0.0;
-    size_t n = 0;
-    for (size_t i = 0; i < points.size(); ++i)
-      if (nearWall[i]) sum += perPoint[i], ++n;
-    return n ? float(sum / double(n)) : 0.0f;
-  };
+  ProbeBakeSettings probeBake = bake;
+  probeBake.seed = o.common.seed;
+  probeBake.visibilityResolution = o.common.visibilityResolution > 0
+                                       ? o.common.visibilityResolution
+                                       : kDefaultVisibilityResolution;
+  const PlacementEvaluation evaluation(scene, tracer, *truth, probeBake);
+  // The measure's noise: a second bake of the points with another seed against the truth.
+  // Probes have the same noise (same rays), so no method can score much below this (a blend
+  // of four probes averages theirs down to between 1/sqrt(2) and 1 times it).
+  Result<FieldError> noise = [&] {
+    Progress progress("noise", points.size(), "points", !o.common.quiet);
+    Result<FieldError> n = evaluation.noise(bake, hashValues(evalSeed, 0x6e6f697365ULL),  // "noise"
+                                            &progress, &cancelFlag());
+    progress.finish();
+    return n;
+  }();
+  if (!noise || cancelFlag().load()) return reportInterrupted("outputs");
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds) -> std::optional<Row> {
-    Result<ProbeSet> set = bakeProbes(scene, tracer, positions, bake, nullptr, &cancelFlag());
+    Result<ProbeSet> set = evaluation.bake(positions, &cancelFlag());
     if (!set) {
       printError(method + ": " + set.error());
       return std::nullopt;
     }
+    ProbeSetError e = evaluation.measure(*set);
     Row row;
+    if (objectTruth) row.spheres = sphereError(*set, *objectTruth, o.common.threads);
     row.method = method;
     row.count = positions.size();
-    row.error = measureFieldError(*set, points, truth, floor, o.common.threads);
-    row.plain = measureFieldError(*set, points, truth, floor, o.common.threads, plainBlend);
-    row.nearWall = nearWallMean(row.error.perPoint);
-    row.nearWallPlain = nearWallMean(row.plain.perPoint);
-    row.crossing = countCellsCrossingGeometry(tracer, *set);
+    row.error = std::move(e.visibility);
+    row.plain = std::move(e.plain);
+    row.nearWall = e.nearWall;
+    row.nearWallPlain = e.nearWallPlain;
+    row.crossing = e.crossing;
     row.seconds = seconds;
     return row;
   };
@@ -361,8 +420,8 @@ int runCompare(const CompareOptions& o) {
   {
     Row r;
     r.method = "noise (rebake)";
-    r.error = r.plain = noise;
-    r.nearWall = r.nearWallPlain = nearWallMean(noise.perPoint);
+    r.error = r.plain = *noise;
+    r.nearWall = r.nearWallPlain = evaluation.nearWallMean(noise->perPoint);
     rows.push_back(std::move(r));
   }
   // A baseline at the same count: placed (timed), baked and measured.
@@ -433,10 +492,13 @@ int runCompare(const CompareOptions& o) {
   for (int k = 0; k < 2; ++k)
     table << std::setw(10) << "mean" << std::setw(10) << "p95" << std::setw(10) << "max"
           << std::setw(11) << "near-wall";
-  table << std::setw(14) << "crossing-tets" << std::setw(10) << "seconds" << "\n";
+  table << std::setw(14) << "crossing-tets" << std::setw(10) << "seconds";
+  if (objectTruth) table << std::setw(11) << "sphere-med" << std::setw(11) << "sphere-x";
+  table << "\n";
   std::ostringstream csv;
   csv << "scene,method,probes,mean,p95,max,near_wall_mean,plain_mean,plain_p95,plain_max,"
-         "plain_near_wall_mean,crossing_cells,inner_cells,seconds\n";
+         "plain_near_wall_mean,crossing_cells,inner_cells,seconds,sphere_median,"
+         "sphere_worst_ratio\n";
   for (const Row& r : rows) {
     table << std::left << std::setw(20) << r.method << std::right << std::setw(7) << r.count
           << std::fixed << std::setprecision(4);
@@ -445,12 +507,19 @@ int runCompare(const CompareOptions& o) {
             << std::setw(11) << near;
     table << std::setw(8) << r.crossing.crossingCells << "/" << std::setw(5) << std::left
           << r.crossing.innerCells << std::right << std::setprecision(1) << std::setw(10)
-          << r.seconds << "\n";
+          << r.seconds;
+    if (r.spheres)
+      table << std::setprecision(4) << std::setw(11) << r.spheres->median << std::setw(11)
+            << r.spheres->worstRatio;
+    table << "\n";
     csv << std::filesystem::path(o.common.scene).filename().string() << "," << r.method << ","
         << r.count << "," << r.error.mean << "," << r.error.p95 << "," << r.error.max << ","
         << r.nearWall << "," << r.plain.mean << "," << r.plain.p95 << "," << r.plain.max << ","
         << r.nearWallPlain << "," << r.crossing.crossingCells << "," << r.crossing.innerCells
-        << "," << r.seconds << "\n";
+        << "," << r.seconds << ",";
+    if (r.spheres) csv << r.spheres->median << "," << r.spheres->worstRatio;
+    else csv << ",";
+    csv << "\n";
   }
   // The fewest automatic probes that reach the grid's error at its count, per blend.
   for (bool visibility : {true, false}) {
@@ -476,8 +545,8 @@ int runCompare(const CompareOptions& o) {
     pc << "\n";
     pc << std::setprecision(6);
     for (size_t i = 0; i < points.size(); ++i) {
-      pc << points[i].x << "," << points[i].y << "," << points[i].z << "," << int(nearWall[i])
-         << "," << irradianceRms(truth[i]);
+      pc << points[i].x << "," << points[i].y << "," << points[i].z << ","
+         << int(evaluation.nearWall()[i]) << "," << irradianceRms(truth->sh[i]);
       for (const Row& r : rows) pc << "," << r.error.perPoint[i];
       for (const Row& r : rows) pc << "," << r.plain.perPoint[i];
       pc << "\n";
@@ -535,6 +604,12 @@ void registerProbesPlaceCommand(CLI::App& probes) {
                 "maps, at --visibility-resolution, or at " +
                     std::to_string(kDefaultVisibilityResolution) + " when that is 0)")
       ->check(CLI::Range(1, 1 << 24))
+      ->capture_default_str();
+  c->add_option("--object-points", compare->objectPoints,
+                "Also light spheres at this many points where objects stand (0.3-2 m above "
+                "walkable surfaces) with each method's probes, against SH baked at their "
+                "centres: median relative error and worst ratio of mean irradiance (0 = off)")
+      ->check(CLI::Range(0, 1 << 20))
       ->capture_default_str();
   c->add_option("--eval-seed", compare->evalSeed,
                 "Seed of the evaluation points and their truth (default: --seed)");
