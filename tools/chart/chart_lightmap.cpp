@@ -66,6 +66,19 @@ Result<LightmapBakeResult> timedLightmapBake(const Scene& scene, const std::stri
   return r;
 }
 
+// The Cornell-box bake settings charts 1 and 7 share (one page, three bounces, no seam
+// stitching), so both compare bakes of the same texels.
+LightmapBakeSettings cornellChartSettings(const ChartOptions& o) {
+  LightmapBakeSettings s;
+  s.resolution = o.quick ? 8.0f : 14.0f;
+  s.maxSize = 256;
+  s.bounces = 3;
+  s.stitchSeams = false;
+  s.seed = o.seed;
+  s.threads = o.threads;
+  return s;
+}
+
 }  // namespace
 
 Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
@@ -73,14 +86,8 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
   Result<Scene> scene = loadScene(path);
   if (!scene) return Error{scene.error()};
 
-  LightmapBakeSettings s;
-  s.resolution = o.quick ? 8.0f : 14.0f;
-  s.maxSize = 256;
-  s.bounces = 3;
+  LightmapBakeSettings s = cornellChartSettings(o);
   s.denoise = false;
-  s.stitchSeams = false;
-  s.seed = o.seed;
-  s.threads = o.threads;
   const std::vector<int> samples =
       o.quick ? std::vector<int>{4, 16, 64} : std::vector<int>{4, 16, 64, 256, 1024};
   const int referenceSamples = 16 * samples.back();
@@ -209,13 +216,7 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
   const std::string path = o.scenesDir + "/cornell_box.gltf";
   Result<Scene> scene = loadScene(path);
   if (!scene) return Error{scene.error()};
-  LightmapBakeSettings s;
-  s.resolution = o.quick ? 8.0f : 14.0f;
-  s.maxSize = 256;
-  s.bounces = 3;
-  s.stitchSeams = false;
-  s.seed = o.seed;
-  s.threads = o.threads;
+  LightmapBakeSettings s = cornellChartSettings(o);
   const std::vector<int> counts =
       o.quick ? std::vector<int>{16, 64} : std::vector<int>{16, 64, 256, 1024};
   const std::vector<float> targets =

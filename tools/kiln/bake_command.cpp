@@ -300,8 +300,8 @@ void registerBakeCommand(CLI::App& app) {
                 "Quality preset (default: the scene's extras.kiln.quality, else none)")
       ->check(CLI::IsMember({"preview", "low", "medium", "high", "production"}));
   b->add_option("--samples", o->samples,
-                "Paths per texel, the same for every texel (overrides the preset's adaptive "
-                "sampling); with --error-target, the cap")
+                "Paths per texel, the same for every texel (overrides the preset's count); with "
+                "--error-target, the cap")
       ->check(CLI::Range(1, 1 << 24));
   b->add_option("--error-target", o->errorTarget,
                 "Adaptive sampling: each texel takes paths until the standard error of its "
