@@ -421,19 +421,23 @@ TEST(StaticDynamic, CastShadowsOffStillBouncesAndBlocksTheSky) {
   ASSERT_TRUE(ghost.ok() && none.ok() && noneOtherSeed.ok());
   // Mean over the ground texels of the shadow region (selected by position: the layouts
   // differ, the box being lightmapped in one only).
-  auto meanUnder = [&](const LightmapBakeResult& r) {
+  // Mean red light over the valid texels whose position `where` selects (-1 when none).
+  auto meanWhere = [](const LightmapBakeResult& r, auto where) {
     double sum = 0.0;
     size_t n = 0;
     for (const LightmapPageResult& page : r.pages)
       for (size_t i = 0; i < page.valid.size(); ++i) {
         const vec3 p(page.position.pixels[3 * i], page.position.pixels[3 * i + 1],
                      page.position.pixels[3 * i + 2]);
-        if (page.valid[i] && f.inShadow(p)) {
+        if (page.valid[i] && where(p)) {
           sum += texel(page.light, i).x;
           ++n;
         }
       }
     return n ? sum / double(n) : -1.0;
+  };
+  auto meanUnder = [&](const LightmapBakeResult& r) {
+    return meanWhere(r, [&](vec3 p) { return f.inShadow(p); });
   };
   const double g = meanUnder(*ghost), o = meanUnder(*none), o2 = meanUnder(*noneOtherSeed);
   const double noise = std::abs(o - o2);
@@ -458,18 +462,9 @@ TEST(StaticDynamic, CastShadowsOffStillBouncesAndBlocksTheSky) {
   auto noneNoSky = bakeLightmaps(open, s);
   ASSERT_TRUE(ghostNoSky.ok() && noneNoSky.ok());
   auto meanBeside = [&](const LightmapBakeResult& r) {
-    double sum = 0.0;
-    size_t n = 0;
-    for (const LightmapPageResult& page : r.pages)
-      for (size_t i = 0; i < page.valid.size(); ++i) {
-        const vec3 p(page.position.pixels[3 * i], page.position.pixels[3 * i + 1],
-                     page.position.pixels[3 * i + 2]);
-        if (page.valid[i] && p.y < 0.01f && p.x > -1.2f && p.x < -0.6f && std::abs(p.z) < 0.4f) {
-          sum += texel(page.light, i).x;
-          ++n;
-        }
-      }
-    return n ? sum / double(n) : -1.0;
+    return meanWhere(r, [](vec3 p) {
+      return p.y < 0.01f && p.x > -1.2f && p.x < -0.6f && std::abs(p.z) < 0.4f;
+    });
   };
   const double bounced = meanBeside(*ghostNoSky) - f.expected();
   std::printf("no sky, beside the box: castShadows off %.5f, no box %.5f: bounced %.5f\n",
