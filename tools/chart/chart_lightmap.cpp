@@ -79,6 +79,18 @@ LightmapBakeSettings cornellChartSettings(const ChartOptions& o) {
   return s;
 }
 
+// The converged reference a chart's bakes are judged against: `s` with `samples` paths per
+// texel, not denoised, and an independent seed, so that its own noise adds to the error
+// measured (1/16 of the largest count's variance at 16x its samples) rather than cancels.
+LightmapBakeSettings referenceSettings(const LightmapBakeSettings& s, int samples,
+                                       uint64_t seed) {
+  LightmapBakeSettings r = s;
+  r.denoise = false;
+  r.samplesPerTexel = samples;
+  r.seed = hashValues(seed, kReferenceTag);
+  return r;
+}
+
 }  // namespace
 
 Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
@@ -100,13 +112,10 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
     return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
 
-  // The reference: the same bake with 16x the largest sample count and an independent seed,
-  // so that its own noise adds (1/16 of the largest count's variance) rather than cancels.
-  LightmapBakeSettings refSettings = s;
-  refSettings.samplesPerTexel = referenceSamples;
-  refSettings.seed = hashValues(o.seed, kReferenceTag);
+  // The reference: the same bake with 16x the largest sample count (see referenceSettings).
   double refSeconds = 0.0;
-  Result<LightmapBakeResult> reference = timedBake(refSettings, &refSeconds);
+  Result<LightmapBakeResult> reference =
+      timedBake(referenceSettings(s, referenceSamples, o.seed), &refSeconds);
   if (!reference) return Error{reference.error()};
 
   // Every (variant, count) bake `repeats` times, the repeats interleaved: round r bakes every
@@ -229,12 +238,9 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
   auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
     return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
-  LightmapBakeSettings refSettings = s;
-  refSettings.denoise = false;
-  refSettings.samplesPerTexel = referenceSamples;
-  refSettings.seed = hashValues(o.seed, kReferenceTag);
   double refSeconds = 0.0;
-  Result<LightmapBakeResult> reference = timedBake(refSettings, &refSeconds);
+  Result<LightmapBakeResult> reference =
+      timedBake(referenceSettings(s, referenceSamples, o.seed), &refSeconds);
   if (!reference) return Error{reference.error()};
 
   struct Variant {
