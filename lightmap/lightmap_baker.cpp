@@ -1020,9 +1020,9 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
       cancelled(cancel))
     return Error{"cancelled"};
   std::string footprintError;
-  if (settings.footprintGrid &&
-      !footprintStage(pages, texels, result.scene, result.layout, **tracer,
-                      settings.supersampling, showProgress, parallel, rays, footprintError) ||
+  if ((settings.footprintGrid &&
+       !footprintStage(pages, texels, result.scene, result.layout, **tracer,
+                       settings.supersampling, showProgress, parallel, rays, footprintError)) ||
       cancelled(cancel))
     return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};
 

@@ -416,8 +416,11 @@ TEST(LightmapDenoise, LowSampleTexelsKeepTheMeanAndNoneBecomesZero) {
               e1.sum / e0.sum);
   EXPECT_LT(e1.rmse, e0.rmse);
   EXPECT_NEAR(e1.sum / e0.sum, 1.0, 1e-5);
-  for (size_t k = 0; k < page.radiance.pixels.size(); ++k)
-    if (before.radiance.pixels[k] > 0.0f) EXPECT_GT(page.radiance.pixels[k], 0.0f) << k;
+  for (size_t k = 0; k < page.radiance.pixels.size(); ++k) {
+    if (before.radiance.pixels[k] > 0.0f) {
+      EXPECT_GT(page.radiance.pixels[k], 0.0f) << k;
+    }
+  }
 }
 
 TEST(LightmapDenoise, StrengthZeroIsIdentity) {

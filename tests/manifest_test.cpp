@@ -36,8 +36,11 @@ std::string kiln() { return std::string(test::kilnExe()) + " "; }
 Manifest fullManifest() {
   Manifest m;
   ManifestPage page0{256, 128, {}};
-  page0.files = {"lightmap-0_light.exr", "lightmap-0_ao.exr", "lightmap-0_direction.exr",
-                 "lightmap-0_shadowmask.exr", "lightmap-0_light_dldr.png"};
+  page0.files.light = "lightmap-0_light.exr";
+  page0.files.ao = "lightmap-0_ao.exr";
+  page0.files.direction = "lightmap-0_direction.exr";
+  page0.files.shadowmask = "lightmap-0_shadowmask.exr";
+  page0.files.lightLdr = "lightmap-0_light_dldr.png";
   ManifestPage page1{64, 64, {}};
   page1.files.light = "lightmap-1_light.exr";
   m.lightmaps = {page0, page1};
@@ -66,7 +69,9 @@ Manifest fullManifest() {
   m.gltf = "room.gltf";
   m.scene = "room.gltf";
   m.warnings = {"object 'wall' (nodeIndex 5): lightmap scaled down"};
-  m.stats = {1234, 5, 987654321012ull};
+  m.stats.texels = 1234;
+  m.stats.invalidTexels = 5;
+  m.stats.rays = 987654321012ull;
   return m;
 }
 
