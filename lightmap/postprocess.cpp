@@ -236,12 +236,17 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
 
 // Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
 constexpr float kDivergenceStep = 0.02f;
-// The per-object SURE test (denoise): standard errors the estimated gain must exceed.
-// Measured on chart 1's Cornell box over 24 seeds (docs/charts.md): at 1 the denoised error
-// came out above raw in 1 seed of 24 at 256 samples (by 0.4%) and at or below it in every
-// other case; 1.5 still left +0.08% at 64 samples and lost 40-60% of the gain at 4 (0.208
-// against 0.173 relative error, raw 0.231), 2 lost most of it.
+// The per-object SURE test (denoise): standard errors the estimated gain must exceed, for
+// a noisy object (relative noise >= kNoisy) and for a nearly converged one (<= kConverged;
+// in between it rises linearly). Where the noise is large the gain is large and 1 keeps it;
+// where the samples have resolved the light the gain the filter can make is a few percent,
+// and SURE's misses (an object that passed at 1.3 standard errors with a realised loss)
+// cost more than the gain. Measured on chart 1's Cornell box over 24 seeds (docs/charts.md):
+// with 1 everywhere one seed in 24 came out 0.47% above raw at 256 samples; with 1.5
+// everywhere the gain at 4 samples fell from 25% to 10%.
 constexpr double kObjectMargin = 1.0;
+constexpr double kConvergedMargin = 2.0;
+constexpr double kNoisy = 0.1, kConverged = 0.05;
 // Interior texels an object needs for its own variance check (calibrateVariance).
 constexpr size_t kCalibrationTexels = 16;
 // The safeguard window: (2r + 1)^2 texels.
@@ -671,8 +676,8 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   // l^2 (each channel's noise in proportion to its value). Where the estimate says the
   // result is not better than the raw texels (a converged object where choosing the blend
   // from noisy local estimates costs more than the filter gains), the object keeps its raw
-  // texels. The object keeps the filter only when the estimated gain exceeds kObjectMargin
-  // times its spread: the per-texel terms' own spread (sqrt of the sum of their squares),
+  // texels. The object keeps the filter only when the estimated gain exceeds a margin
+  // (kObjectMargin to kConvergedMargin by the object's relative noise) times its spread: the per-texel terms' own spread (sqrt of the sum of their squares),
   // and the spread of the realised gain about what SURE estimates, which with raw error e
   // and d = out - x differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test
   // is on the error of this bake, not its expectation.
@@ -681,6 +686,7 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
   const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
   std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);
+  std::vector<double> noise(size_t(objects), 0.0), light(size_t(objects), 0.0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const size_t i = size_t(y) * w + x;
@@ -700,10 +706,21 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       }
       excess[size_t(objectOf(i))] += t;
       spread[size_t(objectOf(i))] += t * t + realised;
+      const double lr = texelLuminance(input, x, y);
+      noise[size_t(objectOf(i))] += var;
+      light[size_t(objectOf(i))] += lr * lr;
     }
+  // The margin: kObjectMargin for a noisy object, rising to kConvergedMargin as its
+  // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged.
+  std::vector<double> margin(size_t(objects), kObjectMargin);
+  for (size_t o = 0; o < size_t(objects); ++o) {
+    const double relative = light[o] > 0.0 ? std::sqrt(noise[o] / light[o]) : 1.0;
+    const double u = std::clamp((kNoisy - relative) / (kNoisy - kConverged), 0.0, 1.0);
+    margin[o] = kObjectMargin + u * (kConvergedMargin - kObjectMargin);
+  }
   for (size_t i = 0; i < n; ++i)
     if (page.valid[i] && objectOf(i) >= 0 &&
-        excess[size_t(objectOf(i))] >= -kObjectMargin * std::sqrt(spread[size_t(objectOf(i))]))
+        excess[size_t(objectOf(i))] >= -margin[size_t(objectOf(i))] * std::sqrt(spread[size_t(objectOf(i))]))
       for (int ch = 0; ch < c; ++ch)
         page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
   restoreObjectSums(page, input);

@@ -127,7 +127,8 @@ struct DenoiseSettings {
 // moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
 // result in colour (its divergence again by perturbation) against the raw texels' risk (sum
 // var): an object the estimate does not find better by more than the spread of the estimate
-// and of this bake's realised gain about it keeps its raw texels. Last, each object's sum
+// and of this bake's realised gain about it (1 standard error for a noisy object, 2 for one
+// whose relative noise is 5% or less) keeps its raw texels. Last, each object's sum
 // per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
 // filter runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});

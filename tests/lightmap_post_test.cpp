@@ -453,10 +453,9 @@ TEST(LightmapDenoise, NeverIncreasesTheColourErrorAndKeepsEachChannelsMean) {
       const ColourError after = colourError(page);
       std::printf("colour noise %.3f seed %d: relative RMSE %.6f -> %.6f\n", rel, int(seed),
                   before.rmse, after.rmse);
-      // The per-object test keeps the filter when SURE's gain passes one standard error,
-      // so a realised error a hair above raw stays possible: measured +0.03% (3% noise,
-      // seed 3); the luminance-only test before gave 0.0295 -> 0.197 there.
-      EXPECT_LE(after.rmse, before.rmse * 1.001) << rel << " " << seed;
+      // Measured: 10% lower at 20% noise, unchanged at 3% and 0.5% (each object keeps its
+      // raw texels); the luminance-only safeguard before gave 0.0295 -> 0.197 at 3%.
+      EXPECT_LE(after.rmse, before.rmse * (1.0 + 1e-6)) << rel << " " << seed;
       for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(after.sum[c] / before.sum[c], 1.0, 1e-5) << rel << " " << seed << " " << c;
       }
@@ -482,7 +481,7 @@ TEST(LightmapDenoise, OverstatedVarianceDoesNotMakeItBlurConvergedLight) {
                   int(seed), before.rmse, after.rmse);
       // Measured unchanged to the last digit; the denoiser before this test gave 0.0098 ->
       // 0.166 (1% noise) and 0.0030 -> 0.097 (0.3%, seed 2).
-      EXPECT_LE(after.rmse, before.rmse * 1.001) << rel << " " << seed;
+      EXPECT_LE(after.rmse, before.rmse * (1.0 + 1e-6)) << rel << " " << seed;
     }
 }
 
