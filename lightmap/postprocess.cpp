@@ -497,7 +497,6 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   std::vector<float> sigma(n, 0.0f);
   if (!page.variance.empty()) {
     for (size_t i = 0; i < n; ++i) sigma[i] = std::sqrt(std::max(0.0f, page.variance[i]));
-    calibrateVariance(g, sigma);
   } else {
     std::vector<uint8_t> estimated(n, 0);
     g.forEachValid(rows, [&](int x, int y, size_t i) {
@@ -524,6 +523,13 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     for (size_t i = 0; i < n; ++i)
       if (page.valid[i] && !estimated[i]) sigma[i] = mean;
   }
+
+  // The noise the safeguards judge the filter by: the given variance bounded by the texels'
+  // own spread (calibrateVariance). The filter's weights keep the variance as given: where
+  // it overstates the noise they mix more, and the safeguards, with the bounded variance,
+  // decide how much of that to keep.
+  std::vector<float> checked = sigma;
+  if (!page.variance.empty()) calibrateVariance(g, checked);
 
   // The à-trous passes over `in` (page.radiance or a perturbed copy): the filtered image.
   auto filter = [&](const Image& in) -> Image {
@@ -655,7 +661,7 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   auto safeguarded = [&](const Image& in) {
     const Image filtered = filter(in);
     const std::vector<float> blend = safeguardWeights(
-        g, in, filtered, sigma, divergenceOf(in, filtered, 1, filter), rows);
+        g, in, filtered, checked, divergenceOf(in, filtered, 1, filter), rows);
     Image out = in;
     for (size_t i = 0; i < n; ++i) {
       const float a = settings.strength * blend[i];
@@ -693,7 +699,7 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       if (!page.valid[i] || objectOf(i) < 0) continue;
       const float* out = page.radiance.pixels.data() + i * size_t(c);
       const float* raw = input.pixels.data() + i * size_t(c);
-      const double var = double(sigma[i]) * sigma[i];
+      const double var = double(checked[i]) * checked[i];
       const double t = colourDistance2(page.radiance, input, i) +
                        2.0 * var * colourVarianceFactor(page.radiance, i) * (double(div[i]) - 1.0);
       // 4 var_c d_c^2: the variance of 2 e d, the part of the realised gain SURE averages.
