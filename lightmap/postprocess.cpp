@@ -293,12 +293,12 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
 // texel p (all 8 neighbours valid, of its object and geometrically compatible) is compared
 // with the mean m_p of those neighbours: a linear gradient cancels in x_p - m_p, and with
 // independent texels E[(x_p - m_p)^2] = var_p + sum_q var_q / 64 + c_p^2, c_p the light's
-// curvature. So R = sum (x_p - m_p)^2 / sum (var_p + sum_q var_q / 64) is at least the ratio
-// of the true variance to the given one: where R < 1 the given variance is too large (a
-// quasi-Monte Carlo texel whose batch spread overstates its error), and every sigma of the
-// object is scaled by sqrt(R). R >= 1 (a gradient with curvature, or variance given too
-// small) changes nothing: the correction only ever lowers the variance, which makes the
-// filter and both SURE tests more cautious, never less. An object with fewer than
+// curvature. So R = sum (x_p - m_p)^2 / sum (var_p + sum_q var_q / 64) is, in expectation,
+// at least the ratio of the true variance to the given one: where R < 1 the given variance
+// is too large (a quasi-Monte Carlo texel whose batch spread overstates its error), and
+// every sigma of the object is scaled by sqrt(R). R >= 1 (a gradient with curvature, or
+// variance given too small) changes nothing: the correction only ever lowers the variance,
+// which makes both SURE safeguards more cautious, never less. An object with fewer than
 // kCalibrationTexels interior texels takes the pooled R of the page's small objects.
 void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
   const LightmapPage& page = g.page;

@@ -114,9 +114,10 @@ struct DenoiseSettings {
 // never 0 where it was > 0. Only valid texels contribute and change; objects never mix. All
 // channels move with the weights of the luminance of the first three (or the first, for grey
 // images).
-// The given variance is first checked against the texels (per object: the spread of each
-// texel about the mean of its 8 neighbours bounds the noise from above, a linear gradient
-// cancelling) and lowered where it is larger than that bound; it is never raised.
+// The safeguards below judge by the given variance checked against the texels (per object:
+// the spread of each texel about the mean of its 8 neighbours bounds the noise from above,
+// a linear gradient cancelling), lowered where it is larger than that bound, never raised;
+// the filter's weights use the variance as given.
 // Then a safeguard, so that the filter does not add error where it blurs light the samples
 // resolved (a gradient along which the luminance weights still mix): each texel becomes
 // x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
