@@ -76,6 +76,29 @@ float texelLuminance(const Image& img, int x, int y) {
   return img.channels >= 3 ? luminance(vec3(p[0], p[1], p[2])) : p[0];
 }
 
+// Squared difference of two texels summed over the colour channels (the first three).
+float colourDistance2(const Image& a, const Image& b, size_t i) {
+  const int c = std::min(a.channels, 3);
+  float sum = 0.0f;
+  for (int ch = 0; ch < c; ++ch) {
+    const float d = a.pixels[i * size_t(a.channels) + size_t(ch)] -
+                    b.pixels[i * size_t(b.channels) + size_t(ch)];
+    sum += d * d;
+  }
+  return sum;
+}
+
+// The variance of a texel's colour (summed over the channels) per unit variance of its
+// luminance, when the channels' noise is proportional to their values (one path's light
+// scales all three): sum_c x_c^2 / l^2 of the texel's colour x with luminance l.
+float colourVarianceFactor(const Image& img, size_t i) {
+  if (img.channels < 3) return 1.0f;
+  const float* p = img.pixels.data() + i * size_t(img.channels);
+  const float l = luminance(vec3(p[0], p[1], p[2]));
+  if (!(l > 0.0f)) return 1.0f;
+  return (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) / (l * l);
+}
+
 vec3 texel3(const Image& img, int x, int y) {
   const float* p = img.at(x, y);
   return vec3(p[0], p[1], p[2]);
@@ -213,10 +236,19 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
 
 // Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
 constexpr float kDivergenceStep = 0.02f;
-// The per-object SURE test (denoise): standard errors the estimated gain must exceed. 1
-// measured on chart 1 (docs/charts.md): 0 keeps objects whose estimated gain is noise (the
-// denoised error 1.8% above raw at 256 samples), 2 drops gains at 4 samples.
+// The per-object SURE test (denoise): standard errors the estimated gain must exceed, for
+// a noisy object (relative noise >= kNoisy) and for a nearly converged one (<= kConverged;
+// in between it rises linearly). Where the noise is large the gain is large and 1 keeps it;
+// where the samples have resolved the light the gain the filter can make is a few percent,
+// and SURE's misses (an object that passed at 1.3 standard errors with a realised loss)
+// cost more than the gain. Measured on chart 1's Cornell box over 24 seeds (docs/charts.md):
+// with 1 everywhere one seed in 24 came out 0.47% above raw at 256 samples; with 1.5
+// everywhere the gain at 4 samples fell from 25% to 10%.
 constexpr double kObjectMargin = 1.0;
+constexpr double kConvergedMargin = 2.0;
+constexpr double kNoisy = 0.1, kConverged = 0.05;
+// Interior texels an object needs for its own variance check (calibrateVariance).
+constexpr size_t kCalibrationTexels = 16;
 // The safeguard window: (2r + 1)^2 texels.
 constexpr int kSafeguardRadius = 5;
 
@@ -242,18 +274,73 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
   std::vector<float> d2(page.texelCount(), 0.0f), blend(page.texelCount(), 0.0f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const float d = texelLuminance(filtered, x, y) - texelLuminance(raw, x, y);
-      d2[size_t(y) * w + x] = d * d;
+      const size_t i = size_t(y) * w + x;
+      d2[i] = colourDistance2(filtered, raw, i);
     }
   g.forEachValid(rows, [&](int x, int y, size_t i) {
     double sumD2 = 0.0, gain = 0.0;
     g.forEachCompatible(x, y, kSafeguardRadius, [&](size_t j) {
       sumD2 += d2[j];
-      gain += double(sigma[j]) * sigma[j] * (1.0 - double(divergence[j]));
+      gain += double(sigma[j]) * sigma[j] * colourVarianceFactor(filtered, j) *
+              (1.0 - double(divergence[j]));
     });
     blend[i] = sumD2 > 0.0 ? float(std::clamp(gain / sumD2, 0.0, 1.0)) : 1.0f;
   });
   return blend;
+}
+
+// The given variance checked against the texels themselves, per object. Each interior
+// texel p (all 8 neighbours valid, of its object and geometrically compatible) is compared
+// with the mean m_p of those neighbours: a linear gradient cancels in x_p - m_p, and with
+// independent texels E[(x_p - m_p)^2] = var_p + sum_q var_q / 64 + c_p^2, c_p the light's
+// curvature. So R = sum (x_p - m_p)^2 / sum (var_p + sum_q var_q / 64) is, in expectation,
+// at least the ratio of the true variance to the given one: where R < 1 the given variance
+// is too large (a quasi-Monte Carlo texel whose batch spread overstates its error), and
+// every sigma of the object is scaled by sqrt(R). R >= 1 (a gradient with curvature, or
+// variance given too small) changes nothing: the correction only ever lowers the variance,
+// which makes both SURE safeguards more cautious, never less. An object with fewer than
+// kCalibrationTexels interior texels takes the pooled R of the page's small objects.
+void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
+  const LightmapPage& page = g.page;
+  const int w = page.width(), h = page.height();
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  std::vector<double> residual(size_t(objects), 0.0), expected(size_t(objects), 0.0);
+  std::vector<size_t> count(size_t(objects), 0);
+  for (int y = 1; y + 1 < h; ++y)
+    for (int x = 1; x + 1 < w; ++x) {
+      const size_t i = size_t(y) * w + x;
+      if (!page.valid[i] || objectOf(i) < 0) continue;
+      double sum = 0.0, var = 0.0;
+      int m = 0;
+      g.forEachCompatible(x, y, 1, [&](size_t j) {
+        if (j == i) return;
+        sum += texelLuminance(page.radiance, int(j % size_t(w)), int(j / size_t(w)));
+        var += double(sigma[j]) * sigma[j];
+        ++m;
+      });
+      if (m < 8) continue;
+      const double d = texelLuminance(page.radiance, x, y) - sum / 8.0;
+      const size_t o = size_t(objectOf(i));
+      residual[o] += d * d;
+      expected[o] += double(sigma[i]) * sigma[i] + var / 64.0;
+      ++count[o];
+    }
+  double smallResidual = 0.0, smallExpected = 0.0;
+  for (size_t o = 0; o < size_t(objects); ++o)
+    if (count[o] < kCalibrationTexels) {
+      smallResidual += residual[o];
+      smallExpected += expected[o];
+    }
+  std::vector<float> scale(size_t(objects), 1.0f);
+  for (size_t o = 0; o < size_t(objects); ++o) {
+    const bool own = count[o] >= kCalibrationTexels;
+    const double r = own ? residual[o] : smallResidual, e = own ? expected[o] : smallExpected;
+    if (e > 0.0 && r < e) scale[o] = float(std::sqrt(r / e));
+  }
+  for (size_t i = 0; i < sigma.size(); ++i)
+    if (page.valid[i] && objectOf(i) >= 0) sigma[i] *= scale[size_t(objectOf(i))];
 }
 
 // Scales each object's valid texels, per channel, so that their sum is the raw sum again:
@@ -437,6 +524,13 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       if (page.valid[i] && !estimated[i]) sigma[i] = mean;
   }
 
+  // The noise the safeguards judge the filter by: the given variance bounded by the texels'
+  // own spread (calibrateVariance). The filter's weights keep the variance as given: where
+  // it overstates the noise they mix more, and the safeguards, with the bounded variance,
+  // decide how much of that to keep.
+  std::vector<float> checked = sigma;
+  if (!page.variance.empty()) calibrateVariance(g, checked);
+
   // The à-trous passes over `in` (page.radiance or a perturbed copy): the filtered image.
   auto filter = [&](const Image& in) -> Image {
   // Variance of each texel's current value, carried through the passes as SVGF does: a
@@ -567,7 +661,7 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   auto safeguarded = [&](const Image& in) {
     const Image filtered = filter(in);
     const std::vector<float> blend = safeguardWeights(
-        g, in, filtered, sigma, divergenceOf(in, filtered, 1, filter), rows);
+        g, in, filtered, checked, divergenceOf(in, filtered, 1, filter), rows);
     Image out = in;
     for (size_t i = 0; i < n; ++i) {
       const float a = settings.strength * blend[i];
@@ -581,31 +675,58 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   const Image input = page.radiance;
   page.radiance = safeguarded(input);
   // Per object, Stein's estimate of the whole result's risk against the raw texels' risk
-  // (sum var): SURE(out) - sum var = sum (out - x)^2 + 2 var (div - 1) over the object's
-  // valid texels, div that of the whole filter-and-safeguard. Where the estimate says the
+  // (sum var), over the colour channels (the error a reader of the lightmap sees; luminance
+  // alone misses colour the filter blurs across, e.g. the bleeding from a red wall):
+  // SURE(out) - sum var = sum |out - x|^2 + 2 var_rgb (div - 1) over the object's valid
+  // texels, div that of the whole filter-and-safeguard and var_rgb = var x sum_c out_c^2 /
+  // l^2 (each channel's noise in proportion to its value). Where the estimate says the
   // result is not better than the raw texels (a converged object where choosing the blend
   // from noisy local estimates costs more than the filter gains), the object keeps its raw
-  // texels. A decision over a whole object averages the noise of hundreds of texels; the
-  // object keeps the filter only when the estimated gain exceeds kObjectMargin times the
-  // spread of the estimate (sqrt of the sum of the squared per-texel terms, which leaves out
-  // their spatial correlation and so understates it): a one-sided test that it helps.
+  // texels. The object keeps the filter only when the estimated gain exceeds a margin
+  // (kObjectMargin to kConvergedMargin by the object's relative noise) times its spread: the per-texel terms' own spread (sqrt of the sum of their squares),
+  // and the spread of the realised gain about what SURE estimates, which with raw error e
+  // and d = out - x differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test
+  // is on the error of this bake, not its expectation.
   const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
   int32_t objects = 1;
   for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
   const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
   std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);
+  std::vector<double> noise(size_t(objects), 0.0), light(size_t(objects), 0.0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const size_t i = size_t(y) * w + x;
       if (!page.valid[i] || objectOf(i) < 0) continue;
-      const double d = texelLuminance(page.radiance, x, y) - texelLuminance(input, x, y);
-      const double t = d * d + 2.0 * double(sigma[i]) * sigma[i] * (double(div[i]) - 1.0);
+      const float* out = page.radiance.pixels.data() + i * size_t(c);
+      const float* raw = input.pixels.data() + i * size_t(c);
+      const double var = double(checked[i]) * checked[i];
+      const double t = colourDistance2(page.radiance, input, i) +
+                       2.0 * var * colourVarianceFactor(page.radiance, i) * (double(div[i]) - 1.0);
+      // 4 var_c d_c^2: the variance of 2 e d, the part of the realised gain SURE averages.
+      const float l = c >= 3 ? luminance(vec3(out[0], out[1], out[2])) : out[0];
+      double realised = 0.0;
+      for (int ch = 0; ch < std::min(c, 3); ++ch) {
+        const double share = l > 0.0f ? double(out[ch]) / l : 1.0;
+        const double d = double(out[ch]) - raw[ch];
+        realised += 4.0 * var * share * share * d * d;
+      }
       excess[size_t(objectOf(i))] += t;
-      spread[size_t(objectOf(i))] += t * t;
+      spread[size_t(objectOf(i))] += t * t + realised;
+      const double lr = texelLuminance(input, x, y);
+      noise[size_t(objectOf(i))] += var;
+      light[size_t(objectOf(i))] += lr * lr;
     }
+  // The margin: kObjectMargin for a noisy object, rising to kConvergedMargin as its
+  // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged.
+  std::vector<double> margin(size_t(objects), kObjectMargin);
+  for (size_t o = 0; o < size_t(objects); ++o) {
+    const double relative = light[o] > 0.0 ? std::sqrt(noise[o] / light[o]) : 1.0;
+    const double u = std::clamp((kNoisy - relative) / (kNoisy - kConverged), 0.0, 1.0);
+    margin[o] = kObjectMargin + u * (kConvergedMargin - kObjectMargin);
+  }
   for (size_t i = 0; i < n; ++i)
     if (page.valid[i] && objectOf(i) >= 0 &&
-        excess[size_t(objectOf(i))] >= -kObjectMargin * std::sqrt(spread[size_t(objectOf(i))]))
+        excess[size_t(objectOf(i))] >= -margin[size_t(objectOf(i))] * std::sqrt(spread[size_t(objectOf(i))]))
       for (int ch = 0; ch < c; ++ch)
         page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
   restoreObjectSums(page, input);

@@ -114,16 +114,22 @@ struct DenoiseSettings {
 // never 0 where it was > 0. Only valid texels contribute and change; objects never mix. All
 // channels move with the weights of the luminance of the first three (or the first, for grey
 // images).
+// The safeguards below judge by the given variance checked against the texels (per object:
+// the spread of each texel about the mean of its 8 neighbours bounds the noise from above,
+// a linear gradient cancelling), lowered where it is larger than that bound, never raised;
+// the filter's weights use the variance as given.
 // Then a safeguard, so that the filter does not add error where it blurs light the samples
 // resolved (a gradient along which the luminance weights still mix): each texel becomes
 // x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
 // unbiased risk estimate (SURE) over an 11x11 window of its object, a = sum var_q (1 - div_q)
-// / sum (f_q - x_q)^2, div = d f_q / d x_q estimated by filtering a perturbed copy once more
+// / sum |f_q - x_q|^2 over the colour channels (var_q per unit of luminance variance scaled
+// by sum_c f_c^2 / l^2), div = d f_q / d x_q estimated by filtering a perturbed copy once more
 // (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
 // moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
-// result (its divergence again by perturbation) against the raw texels' risk (sum var): an
-// object the estimate does not find better by more than the estimate's spread keeps its raw
-// texels. Last, each object's sum
+// result in colour (its divergence again by perturbation) against the raw texels' risk (sum
+// var): an object the estimate does not find better by more than the spread of the estimate
+// and of this bake's realised gain about it (1 standard error for a noisy object, 2 for one
+// whose relative noise is 5% or less) keeps its raw texels. Last, each object's sum
 // per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
 // filter runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});

@@ -128,9 +128,10 @@ Csv runChart(const std::string& chart, const std::string& name) {
 TEST(Chart, LightmapErrorFallsAsOneOverSqrtSamples) {
   const Csv csv = runChart("lightmap", "lightmap_samples");
   EXPECT_EQ(csv.columns,
-            (std::vector<std::string>{"variant", "samples", "relative_rms_error", "rms_error",
-                                      "mean_ratio", "variance_ratio", "bake_seconds",
-                                      "light_seconds", "rays", "texels", "repeats",
+            (std::vector<std::string>{"variant", "samples", "relative_rms_error",
+                                      "max_error_vs_raw", "rms_error", "mean_ratio",
+                                      "mean_ratio_stderr", "variance_ratio", "bake_seconds",
+                                      "light_seconds", "rays", "texels", "seeds",
                                       "reference_samples"}));
   std::vector<double> lx, ly;
   double previous = kInfinity;

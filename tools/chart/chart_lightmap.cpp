@@ -1,5 +1,6 @@
 // chart_lightmap.cpp: chart 1, lightmap samples per texel vs relative error vs bake time, on
 // the Cornell box (chart_measure.h, docs/charts.md).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -103,11 +104,22 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
   const std::vector<int> samples =
       o.quick ? std::vector<int>{4, 16, 64} : std::vector<int>{4, 16, 64, 256, 1024};
   const int referenceSamples = 16 * samples.back();
-  const int repeats = o.quick ? 1 : 3;
+  // Seeds per count: one seed's mean ratio over the ~430 texels spreads by 1.4% at 4 paths
+  // per texel (0.6% at 16, 0.3% at 64: measured over 200 seeds), so the low counts take
+  // more seeds (about the same paths per count) for a mean ratio known to ~0.2%, and every
+  // count at least kMinSeeds, so that "denoised <= raw" is seen on several seeds.
+  const int minSeeds = o.quick ? 2 : 8;
+  const int pathsPerCount = o.quick ? 16 : 256;
+  auto seedsFor = [&](int count) { return std::max(minSeeds, pathsPerCount / count); };
   const std::vector<bool> denoised = {false, true};
+  size_t bakes = 1;
+  int rounds = 0;
+  for (int count : samples) {
+    bakes += denoised.size() * size_t(seedsFor(count));
+    rounds = std::max(rounds, seedsFor(count));
+  }
 
-  Progress progress("chart lightmap", 1 + samples.size() * denoised.size() * size_t(repeats),
-                    "bakes", o.progress);
+  Progress progress("chart lightmap", bakes, "bakes", o.progress);
   auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
     return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
   };
@@ -118,57 +130,79 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
       timedBake(referenceSettings(s, referenceSamples, o.seed), &refSeconds);
   if (!reference) return Error{reference.error()};
 
-  // Every (variant, count) bake `repeats` times, the repeats interleaved: round r bakes every
-  // variant once, so that a slow spell of the machine hits all variants alike. Outputs are
-  // bit-identical across repeats (deterministic bake); the error is taken from the first.
+  // Every (variant, count) bake once per seed o.seed, o.seed + 1, ..., the seeds
+  // interleaved: round r bakes every variant and count that takes seed r, so that a slow
+  // spell of the machine hits all variants alike. Each seed's bake is also a timing repeat.
   struct Cell {
     std::vector<double> wall, light;
-    ErrorSums error;
+    std::vector<double> relative, rms, ratio;  // per seed
+    double variance = 0.0, lumDiff2 = 0.0;     // pooled over seeds
+    size_t texels = 0;
     uint64_t rays = 0;
   };
   std::vector<Cell> cells(samples.size() * denoised.size());
-  for (int r = 0; r < repeats; ++r)
+  for (int r = 0; r < rounds; ++r)
     for (size_t v = 0; v < denoised.size(); ++v)
       for (size_t k = 0; k < samples.size(); ++k) {
+        if (r >= seedsFor(samples[k])) continue;
         LightmapBakeSettings settings = s;
         settings.samplesPerTexel = samples[k];
         settings.denoise = denoised[v];
+        settings.seed = o.seed + uint64_t(r);
         double wall = 0.0;
         Result<LightmapBakeResult> bake = timedBake(settings, &wall);
         if (!bake) return Error{bake.error()};
         Cell& c = cells[v * samples.size() + k];
         c.wall.push_back(wall);
         c.light.push_back(bake->stats.seconds);
-        if (r == 0) {
-          c.error = compareBakes(*bake, *reference);
-          c.rays = bake->stats.rays;
-        }
+        const ErrorSums e = compareBakes(*bake, *reference);
+        c.relative.push_back(e.relative());
+        c.rms.push_back(std::sqrt(e.diff2 / (double(std::max<size_t>(e.texels, 1)) * 3.0)));
+        c.ratio.push_back(e.ratio());
+        c.variance += e.variance;
+        c.lumDiff2 += e.lumDiff2;
+        c.texels = e.texels;
+        if (r == 0) c.rays = bake->stats.rays;
       }
   progress.finish();
+
+  auto mean = [](const std::vector<double>& x) {
+    double sum = 0.0;
+    for (double v : x) sum += v;
+    return x.empty() ? 0.0 : sum / double(x.size());
+  };
+  auto standardError = [&](const std::vector<double>& x) {
+    if (x.size() < 2) return 0.0;
+    const double m = mean(x);
+    double ss = 0.0;
+    for (double v : x) ss += (v - m) * (v - m);
+    return std::sqrt(ss / double(x.size() - 1) / double(x.size()));
+  };
 
   ChartTable t;
   t.name = "lightmap_samples";
   t.title = "Lightmap: samples per texel vs error vs bake time (cornell_box)";
-  t.columns = {"variant", "samples", "relative_rms_error", "rms_error", "mean_ratio",
-               "variance_ratio", "bake_seconds", "light_seconds", "rays", "texels", "repeats",
-               "reference_samples"};
+  t.columns = {"variant", "samples", "relative_rms_error", "max_error_vs_raw", "rms_error",
+               "mean_ratio", "mean_ratio_stderr", "variance_ratio", "bake_seconds",
+               "light_seconds", "rays", "texels", "seeds", "reference_samples"};
   std::vector<double> xs, ys;
   for (size_t v = 0; v < denoised.size(); ++v)
     for (size_t k = 0; k < samples.size(); ++k) {
       const Cell& c = cells[v * samples.size() + k];
-      const double n = double(std::max<size_t>(c.error.texels, 1)) * 3.0;
-      const double rms = std::sqrt(c.error.diff2 / n);
-      const double rel = c.error.ref2 > 0.0 ? std::sqrt(c.error.diff2 / c.error.ref2) : 0.0;
+      const Cell& raw = cells[k];  // variant 0, the same count and seeds
+      double worst = 0.0;
+      for (size_t i = 0; i < c.relative.size(); ++i)
+        worst = std::max(worst, raw.relative[i] > 0.0 ? c.relative[i] / raw.relative[i] : 0.0);
+      const double rel = mean(c.relative);
       if (!denoised[v]) {
         xs.push_back(samples[k]);
         ys.push_back(rel);
       }
-      t.addRow({denoised[v] ? "denoised" : "raw", std::to_string(samples[k]), num(rel), num(rms),
-                num(c.error.ratio()),
-                num(c.error.lumDiff2 > 0.0 ? c.error.variance / c.error.lumDiff2 : 0.0),
-                num(median(c.wall)), num(median(c.light)), std::to_string(c.rays),
-                std::to_string(c.error.texels), std::to_string(repeats),
-                std::to_string(referenceSamples)});
+      t.addRow({denoised[v] ? "denoised" : "raw", std::to_string(samples[k]), num(rel),
+                num(worst), num(mean(c.rms)), num(mean(c.ratio)), num(standardError(c.ratio)),
+                num(c.lumDiff2 > 0.0 ? c.variance / c.lumDiff2 : 0.0), num(median(c.wall)),
+                num(median(c.light)), std::to_string(c.rays), std::to_string(c.texels),
+                std::to_string(c.relative.size()), std::to_string(referenceSamples)});
     }
   const double slope = logLogSlope(xs, ys);
 
@@ -181,15 +215,23 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
   t.notes.push_back("baseline: a reference bake of the same settings (denoiser off) with " +
                     std::to_string(referenceSamples) + " samples/texel and an independent seed (" +
                     num(refSeconds) + " s)");
+  t.notes.push_back("seeds: each count is baked with seeds " + std::to_string(o.seed) +
+                    ", " + std::to_string(o.seed + 1) + ", ... (at least " +
+                    std::to_string(minSeeds) + ", " + std::to_string(pathsPerCount) +
+                    " / samples at low counts); raw and denoised rows of a count share them");
   t.notes.push_back("relative_rms_error = sqrt(sum (x - ref)^2 / sum ref^2) over RGB of the "
-                    "texels valid in both; rms_error in lightmap units (E / pi); mean_ratio = "
-                    "sum x / sum ref over the same texels; variance_ratio = sum of the "
-                    "baker's per-texel luminance variance (what the denoiser is given) / sum of "
-                    "the squared luminance error, over the same texels (1 = calibrated; the "
+                    "texels valid in both, mean over the seeds; max_error_vs_raw = the largest "
+                    "over the seeds of a seed's relative error / the raw bake's of the same seed "
+                    "(1 for raw rows; <= 1: the denoiser never added error); rms_error in "
+                    "lightmap units (E / pi); mean_ratio = sum x / sum ref over the same texels, "
+                    "mean over the seeds, and mean_ratio_stderr its standard error (the spread "
+                    "over seeds / sqrt(seeds)); variance_ratio = sum of the baker's per-texel "
+                    "luminance variance (what the denoiser is given) / sum of the squared "
+                    "luminance error, over the same texels and all seeds (1 = calibrated; the "
                     "reference's own noise adds about 1/16 of the 1024-sample variance)");
   t.notes.push_back("timing: bake_seconds = wall time of bakeLightmaps (all stages), "
-                    "light_seconds = its light stage; median of " + std::to_string(repeats) +
-                    " repeats, interleaved (each round bakes every variant and count once)");
+                    "light_seconds = its light stage; median over the seeds' bakes, "
+                    "interleaved (each round bakes every variant and count once)");
   t.notes.push_back("fitted log-log slope of raw error vs samples: " + num(slope) +
                     " (Monte Carlo: -0.5)");
 
