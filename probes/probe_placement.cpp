@@ -618,7 +618,8 @@ class ProbePlacer {
   Result<ProbePlacement> run();
 
  private:
-  // A set's score: its mean check error plus leakWeight x its leak estimate.
+  // A set's score: its mean error at the scoring check points plus leakWeight x its leak
+  // estimate. `field` holds the error at every check point (the pick points too).
   struct Scored {
     FieldError field;
     float leak = 0.0f;
@@ -643,6 +644,7 @@ class ProbePlacer {
   std::optional<Scored> evaluate(const std::vector<uint32_t>& sel);
   std::optional<float> leakOfSelection(const std::vector<uint32_t>& sel);
   std::vector<uint32_t> startSet(bool withCorners) const;
+  std::vector<uint32_t> pickOrder() const;
   void takeSnapshots(const std::vector<uint32_t>& bestSoFar);
   int64_t nearestCandidate(vec3 p, const std::vector<uint32_t>& exclude) const;
   bool addSpawned(const std::vector<vec3>& spawned);
@@ -672,6 +674,10 @@ class ProbePlacer {
   std::vector<vec3> checks_;
   std::vector<ShL2Rgb> truth_;
   float floor_ = 0.0f;
+  // Per check point: 1 = it scores sets, 0 = it drives growth's picks (holdOut), or 1 for
+  // every point when they do both.
+  std::vector<uint8_t> scoring_;
+  bool picksFromScoring_ = true;  // !holdOut: the scoring points drive picks too
 
   std::string topologyError_;
   std::map<std::array<uint32_t, 4>, float> leakCache_;  // by sorted candidate indices
@@ -846,7 +852,7 @@ Status ProbePlacer::bakeTruth() {
   sampling.objectShare = settings_.floorHeight > 0.0f ? settings_.objectCheckShare : 0.0f;
   Result<TruthPoints> truth =
       bakeTruthPoints(scene_, tracer_, volumes_, settings_.checkPoints,
-                      hashValues(settings_.seed, kCheckPointTag), settings_.validity, truthBake,
+                      placementCheckPointSeed(settings_.seed), settings_.validity, truthBake,
                       nullptr, cancel_, sampling);
   if (!truth) {
     if (isCancelled()) return Error{"cancelled"};
@@ -856,6 +862,12 @@ Status ProbePlacer::bakeTruth() {
   truth_ = std::move(truth->sh);
   floor_ = truth->floor;
   result_.checkPoints = uint32_t(checks_.size());
+  // Held out: even-numbered points pick, odd-numbered ones score; both halves hold points
+  // where objects stand (the first ones) and uniform ones (the rest).
+  picksFromScoring_ = !settings_.holdOut || checks_.size() < 8;
+  scoring_.assign(checks_.size(), 1);
+  if (!picksFromScoring_)
+    for (size_t i = 0; i < checks_.size(); i += 2) scoring_[i] = 0;
   result_.checkPointsAboveFloors =
       std::min(result_.checkPoints,
                uint32_t(std::lround(double(settings_.checkPoints) * double(sampling.objectShare))));
@@ -937,8 +949,12 @@ std::optional<ProbePlacer::Scored> ProbePlacer::evaluate(const std::vector<uint3
   }
   Scored out;
   out.field = measureFieldError(*set, checks_, truth_, floor_, settings_.threads);
+  double sum = 0.0;
+  size_t n = 0;
+  for (size_t i = 0; i < checks_.size(); ++i)
+    if (scoring_[i]) sum += out.field.perPoint[i], ++n;
   if (settings_.leakWeight > 0.0f) out.leak = leakOf(*set, sel);
-  out.score = out.field.mean + settings_.leakWeight * out.leak;
+  out.score = float(sum / double(std::max<size_t>(n, 1))) + settings_.leakWeight * out.leak;
   return out;
 }
 
@@ -1129,15 +1145,10 @@ void ProbePlacer::grow() {
     batch = std::min(batch, settings_.budget - uint32_t(selected_.size()));
     if (!snapshotsLeft_.empty() && snapshotsLeft_.front() > selected_.size())
       batch = std::min(batch, snapshotsLeft_.front() - uint32_t(selected_.size()));
-    std::vector<uint32_t> order(checks_.size());
-    std::iota(order.begin(), order.end(), 0u);
-    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-      return current_->field.perPoint[a] > current_->field.perPoint[b];
-    });
     std::vector<uint32_t> picks;
     std::vector<vec3> pickPositions, spawned;
-    for (uint32_t j : order) {
-      if (picks.size() >= batch || current_->field.perPoint[j] <= 0.0f) break;
+    for (uint32_t j : pickOrder()) {
+      if (picks.size() >= batch) break;
       bool covered = false;
       for (const vec3& q : pickPositions)
         covered = covered || glm::length(q - checks_[j]) < exclusion;
@@ -1187,6 +1198,18 @@ void ProbePlacer::grow() {
     takeSnapshots(bestSelected_);
   }
   keepBest();
+}
+
+// The pick points (all check points unless held out) with some error, worst first (ties
+// in index order).
+std::vector<uint32_t> ProbePlacer::pickOrder() const {
+  const std::vector<float>& error = current_->field.perPoint;
+  std::vector<uint32_t> order;
+  for (uint32_t j = 0; j < checks_.size(); ++j)
+    if ((picksFromScoring_ || !scoring_[j]) && error[j] > 0.0f) order.push_back(j);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return error[a] > error[b]; });
+  return order;
 }
 
 // Back to the best-scoring set seen.
@@ -1292,6 +1315,8 @@ ProbePlacement ProbePlacer::finish() {
 }
 
 }  // namespace
+
+uint64_t placementCheckPointSeed(uint64_t seed) { return hashValues(seed, kCheckPointTag); }
 
 Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
                                    const ProbePlacementSettings& settings,

@@ -507,6 +507,39 @@ TEST(ProbePlacement, BelowTheBudgetSaysWhy) {
   EXPECT_EQ(placed->belowBudget.empty(), placed->probes.size() * 10 >= size_t(s.budget) * 9);
 }
 
+// Held-out check points (ProbePlacementSettings::holdOut): growth picks only from the
+// even-numbered check points, the odd-numbered ones score the sets. With candidateReach 0
+// every pick spawns a probe at its own check point, so the placed probes that stand on check
+// points stand on even-numbered ones only (without the hold-out: on both).
+TEST(ProbePlacement, GrowthPicksOnlyFromTheCheckPointsThatDoNotScore) {
+  const Traced t = traced(twoCells());
+  ProbePlacementSettings s = smallSettings();
+  s.reachableOnly = false;
+  s.floorHeight = 0.0f;  // check points uniform over the volume: randomValidPoints
+  s.candidateReach = 0.0f;
+  s.prune = false;
+  const std::vector<Bounds3> volumes = placementVolumes(t.scene, {});
+  const std::vector<vec3> checks =
+      randomPlacementPoints(t.scene, *t.tracer, volumes, s.checkPoints,
+                            placementCheckPointSeed(s.seed), s.validity, PointSampling{});
+  for (bool holdOut : {true, false}) {
+    s.holdOut = holdOut;
+    Result<ProbePlacement> placed = placeProbes(t.scene, *t.tracer, s);
+    ASSERT_TRUE(bool(placed)) << placed.error();
+    ASSERT_EQ(checks.size(), placed->checkPoints);
+    size_t onPick = 0, onScoring = 0;
+    for (const PlacedProbe& p : placed->probes)
+      for (size_t i = 0; i < checks.size(); ++i)
+        if (p.position == checks[i]) ++(i % 2 == 0 ? onPick : onScoring);
+    EXPECT_GT(onPick, 0u) << "hold-out " << holdOut;
+    if (holdOut) {
+      EXPECT_EQ(onScoring, 0u);
+    } else {
+      EXPECT_GT(onScoring, 0u);
+    }
+  }
+}
+
 #else
 // The comparison on the shipped scenes with their default volumes (docs/probe_placement.md):
 // at equal probe counts (the automatic run's budget is the grid's count) the automatic

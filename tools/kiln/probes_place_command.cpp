@@ -67,6 +67,7 @@ struct CommonOptions {
   int depth = 2;
   float leakWeight = 1.0f;
   float floorHeight = 0.4f;
+  bool holdOut = false;
   bool noSceneProbes = false;
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = score the plain blend
   uint64_t seed = 0;
@@ -93,6 +94,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
   s->maxDepth = o.depth;
   s->leakWeight = o.leakWeight;
   s->floorHeight = o.floorHeight;
+  s->holdOut = o.holdOut;
   s->bake.visibilityResolution = o.visibilityResolution;
   s->seed = o.seed;
   s->threads = o.threads;
@@ -134,6 +136,9 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
                 "sparser layers above it (0 = octree corners only)")
       ->check(CLI::Range(0.0f, 100.0f))
       ->capture_default_str();
+  c->add_flag("--hold-out", o->holdOut,
+              "Growth picks from half of the check points and the other half scores the sets "
+              "(by default the same check points do both)");
   c->add_flag("--no-scene-probes", o->noSceneProbes,
               "Ignore the scene's probe groups (extras.kiln.probes); by default they are fixed "
               "probes that placement builds around");
