@@ -513,9 +513,13 @@ int runCompare(const CompareOptions& o) {
     table << std::setw(8) << r.crossing.crossingCells << "/" << std::setw(5) << std::left
           << r.crossing.innerCells << std::right << std::setprecision(1) << std::setw(10)
           << r.seconds;
-    if (r.spheres)
-      table << std::setprecision(4) << std::setw(11) << r.spheres->median << std::setw(11)
-            << r.spheres->worstRatio;
+    // A ratio past a million is a sphere left (all but) black against lit truth, or lit
+    // against black truth: its digits say nothing more, so the table prints ">1e6".
+    if (r.spheres) {
+      table << std::setprecision(4) << std::setw(11) << r.spheres->median << std::setw(11);
+      if (r.spheres->worstRatio > 1e6f) table << ">1e6";
+      else table << r.spheres->worstRatio;
+    }
     table << "\n";
     csv << std::filesystem::path(o.common.scene).filename().string() << "," << r.method << ","
         << r.count << "," << r.error.mean << "," << r.error.p95 << "," << r.error.max << ","
