@@ -39,6 +39,7 @@ struct BakeOptions {
   std::string preset;
   std::optional<int> samples;
   std::optional<float> errorTarget;
+  std::optional<int> bounceCache;
   bool coverageMap = false;
   bool footprintGrid = false;
   std::optional<float> resolution;
@@ -198,6 +199,7 @@ int runBake(const BakeOptions& o) {
     settings.errorTarget = 0.0f;
   }
   if (o.errorTarget) settings.errorTarget = *o.errorTarget;
+  if (o.bounceCache) settings.bounceCacheSamples = *o.bounceCache;
   if (o.coverageMap) settings.coverageMap = true;
   if (o.footprintGrid) settings.footprintGrid = true;
   if (o.resolution) settings.resolution = *o.resolution;
@@ -307,6 +309,10 @@ void registerBakeCommand(CLI::App& app) {
                 "Adaptive sampling: each texel takes paths until the standard error of its "
                 "mean is at most this share of its value (plus a floor); 0 = off")
       ->check(CLI::Range(0.0f, 1.0f));
+  b->add_option("--bounce-cache", o->bounceCache,
+                "Final gather: a first pass of this many paths per texel, whose light the "
+                "bake's paths read at their first hit instead of tracing on; 0 = off")
+      ->check(CLI::Range(0, 1 << 24));
   b->add_flag("--footprint-grid", o->footprintGrid,
               "Texels next to geometry average the visible part of their footprint (4 x 4 "
               "points; experimental: mixes both sides of thin walls)");
