@@ -72,6 +72,8 @@ constexpr float kPushReachTexels = 1.0f;
 constexpr int kPushPasses = 2;
 // Footprint grid of texels next to geometry: n x n points (stage 4b).
 constexpr int kFootprintGrid = 4;
+// Adaptive sampling (allocateSamples): no texel takes more than this many times the mean.
+constexpr uint32_t kAdaptiveCap = 8;
 
 Status validate(const LightmapBakeSettings& s) {
   auto bad = [](const std::string& what) { return Status(Error{"lightmap bake: " + what}); };
@@ -385,6 +387,9 @@ struct LightSettings {
   float aoMaxDistance = 1.0f;
   bool directional = false;
   const ChannelLights* shadowmask = nullptr;  // null: no shadowmask
+  // Per covered texel (index-aligned with the light stage's texels), its paths instead of
+  // `samples` (allocateSamples); null = `samples` everywhere.
+  const std::vector<uint32_t>* texelSamples = nullptr;
 };
 
 // Running sums over sample points (each term x the point's sample count).
@@ -730,8 +735,10 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
           const uint64_t texelStart = Integrator::threadRayCount() + extraRays;
-          out[i] = lightTexel(integrator, s, key, points, count, texel.footprintGrid, reach,
-                              extraRays);
+          LightSettings texelSettings = s;
+          if (s.texelSamples) texelSettings.samples = std::max((*s.texelSamples)[i], count);
+          out[i] = lightTexel(integrator, texelSettings, key, points, count,
+                              texel.footprintGrid, reach, extraRays);
           if (!out[i].valid && !out[i].insideSolid)
             out[i].insideSolid = insideSolid(integrator.scene(), integrator.tracer(),
                                              uint32_t(texel.object), texel.sample, extraRays);
@@ -1002,7 +1009,8 @@ std::unique_ptr<LightmapBounceCache> bounceCachePass(
     std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels, const Scene& scene,
     const AtlasLayout& layout, const Tracer& tracer, IntegratorSettings is,
     const LightmapBakeSettings& settings, bool showProgress, ParallelOptions parallel,
-    std::atomic<uint64_t>& rays, std::vector<std::vector<uint8_t>>& validity) {
+    std::atomic<uint64_t>& rays, std::vector<std::vector<uint8_t>>& validity,
+    std::vector<float>& pathSpread) {
   is.bounceView = true;
   is.indirectIntensity = 1.0f;
   is.maxBounces = std::max(0, is.maxBounces - 1);
@@ -1018,6 +1026,9 @@ std::unique_ptr<LightmapBounceCache> bounceCachePass(
   std::vector<TexelLight> light;
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays, "bounce cache"))
     return nullptr;
+  pathSpread.assign(texels.size(), -1.0f);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (light[i].valid) pathSpread[i] = std::sqrt(light[i].variance * float(light[i].samples));
   validity.resize(pages.size());
   for (size_t p = 0; p < pages.size(); ++p) validity[p].assign(pages[p].texels.size(), 0);
   for (size_t i = 0; i < texels.size(); ++i)
@@ -1042,6 +1053,63 @@ std::unique_ptr<LightmapBounceCache> bounceCachePass(
     if (cancelled(parallel.cancel)) return nullptr;
   }
   return std::make_unique<LightmapBounceCache>(scene, layout, std::move(images));
+}
+
+// Adaptive sampling (LightmapBakeSettings::adaptiveSamples): paths per texel in proportion
+// to the spread of one path's value there, Neyman's allocation, which minimises the summed
+// squared error of the texels for a given total of paths (sum sigma_t^2 / n_t subject to
+// sum n_t = N: n_t ~ sigma_t). The spread comes from the bounce cache's first pass, whose
+// random numbers are its own: a texel's count does not depend on the paths that make its
+// value, so stopping where a few paths happened to agree cannot bias it dark (what sinks a
+// per-texel stopping rule). Each spread is the mean over the valid texels of its object
+// among its 3 x 3 neighbours (the first pass has few paths per texel; invalid texels say
+// nothing about the light beside them). The counts are clamped to [mean / 2,
+// cap] and scaled (bisection on the factor) so that their sum is mean x texels; computed in
+// texel order, so the same at any thread count.
+std::vector<uint32_t> allocateSamples(const std::vector<RasterPage>& pages,
+                                      const std::vector<TexelRef>& texels,
+                                      const std::vector<float>& pathSpread, uint32_t mean,
+                                      uint32_t cap) {
+  std::vector<std::vector<int32_t>> where(pages.size());  // texel -> index in `texels`
+  for (size_t p = 0; p < pages.size(); ++p) where[p].assign(pages[p].texels.size(), -1);
+  for (size_t i = 0; i < texels.size(); ++i) where[texels[i].page][texels[i].index] = int32_t(i);
+  std::vector<double> spread(texels.size(), 0.0);
+  for (size_t i = 0; i < texels.size(); ++i) {
+    const RasterPage& page = pages[texels[i].page];
+    const int w = page.width, h = page.height;
+    const int x = int(texels[i].index % uint32_t(w)), y = int(texels[i].index / uint32_t(w));
+    double sum = 0.0;
+    int n = 0;
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int nx = x + dx, ny = y + dy;
+        if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+        const int32_t j = where[texels[i].page][size_t(ny) * size_t(w) + size_t(nx)];
+        if (j < 0 || pathSpread[size_t(j)] < 0.0f ||
+            page.texels[texels[size_t(j)].index].object != page.texels[texels[i].index].object)
+          continue;
+        sum += pathSpread[size_t(j)];
+        ++n;
+      }
+    spread[i] = n > 0 ? sum / n : 0.0;
+  }
+  const uint32_t lo = std::max(1u, mean / 2);
+  const double target = double(mean) * double(texels.size());
+  auto total = [&](double k) {
+    double t = 0.0;
+    for (double s : spread) t += std::clamp(std::round(k * s), double(lo), double(cap));
+    return t;
+  };
+  double kLo = 0.0, kHi = 1.0;
+  while (total(kHi) < target && kHi < 1e30) kHi *= 2.0;
+  for (int it = 0; it < 60; ++it) {
+    const double k = 0.5 * (kLo + kHi);
+    (total(k) < target ? kLo : kHi) = k;
+  }
+  std::vector<uint32_t> counts(texels.size());
+  for (size_t i = 0; i < texels.size(); ++i)
+    counts[i] = uint32_t(std::clamp(std::round(kLo * spread[i]), double(lo), double(cap)));
+  return counts;
 }
 
 }  // namespace
@@ -1147,9 +1215,11 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   is.indirectIntensity = settings.indirectIntensity;
   std::unique_ptr<LightmapBounceCache> bounceCache;
   std::vector<std::vector<uint8_t>> cacheValidity;
+  std::vector<float> pathSpread;
   if (settings.bounceCacheSamples > 0 && settings.bounces > 0) {
     bounceCache = bounceCachePass(pages, texels, result.scene, result.layout, **tracer, is,
-                                  settings, showProgress, parallel, rays, cacheValidity);
+                                  settings, showProgress, parallel, rays, cacheValidity,
+                                  pathSpread);
     if (!bounceCache || cancelled(cancel)) return Error{"cancelled"};
     is.bounceCache = bounceCache.get();
   }
@@ -1180,6 +1250,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.layout = &result.layout;
   ls.directional = settings.directional;
   ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
+  std::vector<uint32_t> texelSamples;
+  if (settings.adaptiveSamples && bounceCache && !(settings.errorTarget > 0.0f)) {
+    texelSamples = allocateSamples(pages, texels, pathSpread, ls.samples,
+                                   ls.samples * kAdaptiveCap);
+    ls.texelSamples = &texelSamples;
+  }
   std::vector<TexelLight> light;
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
       cancelled(cancel))

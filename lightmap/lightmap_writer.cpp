@@ -139,6 +139,7 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["supersampling"] = s.supersampling;
   j["errorTarget"] = shortestDecimal(s.errorTarget);
   j["bounceCacheSamples"] = s.bounceCacheSamples;
+  j["adaptiveSamples"] = s.adaptiveSamples;
   j["minSamples"] = s.minSamples;
   j["errorFloor"] = shortestDecimal(s.errorFloor);
   j["seed"] = s.seed;

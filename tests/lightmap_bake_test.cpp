@@ -472,14 +472,14 @@ TEST(LightmapBake, SupersampledTexelsPushedOutOnlyInPartDoNotSpreadTheFill) {
 
 // The quad running into the block (face at x = 1.05 m) under a constant sky L = 1, no
 // bounces, with `settings` on top of smallSettings(). Returns the bake.
-Result<LightmapBakeResult> bakeBlockFoot(LightmapBakeSettings s) {
+Result<LightmapBakeResult> bakeBlockFoot(LightmapBakeSettings s, int bounces = 0) {
   Scene scene = quadScene();
   const uint32_t m = test::addMaterial(scene, test::lambert(vec3(0.5f)));
   const uint32_t block =
       test::addBox(scene, "block", vec3(1.05f, -0.5f, -2.5f), vec3(3.0f, 0.5f, 0.5f), m, false);
   scene.objects[block].settings.scaleInLightmap = 0.0f;
   scene.sky = Sky::constant(vec3(1.0f));
-  s.bounces = 0;
+  s.bounces = bounces;
   return bakeLightmaps(scene, s);
 }
 
@@ -549,6 +549,49 @@ TEST(LightmapBake, AdaptiveSamplingSpendsPathsWherePathsDisagree) {
   EXPECT_GT(perColumn[8], 2.0 * perColumn[0]);
   EXPECT_LT(a->stats.minSamples, a->stats.maxSamples);
   EXPECT_LT(a->stats.meanSamples, 0.5 * 4096.0);
+  ASSERT_EQ(a->pages.size(), b->pages.size());
+  for (size_t p = 0; p < a->pages.size(); ++p) {
+    EXPECT_EQ(a->pages[p].light.pixels, b->pages[p].light.pixels);
+    EXPECT_EQ(a->pages[p].samples, b->pages[p].samples);
+  }
+  EXPECT_EQ(a->stats.rays, b->stats.rays);
+}
+
+// Neyman allocation from the bounce cache's first pass (settings.adaptiveSamples): the same
+// block foot under a constant sky (2 bounces, so that there is a cache), where paths disagree most at the foot (column 8) and
+// least 1 m from it (column 0); the texels under the block (invalid) take the least. The
+// mean over the texels stays samplesPerTexel (the counts
+// are scaled to it; rounding moves it by < 1), the foot gets more than the far side, no
+// texel leaves [samplesPerTexel / 2, 8 x samplesPerTexel], and the result is bit-identical
+// at 1 and 2 threads.
+TEST(LightmapBake, AdaptiveAllocationFromTheBounceCacheKeepsTheMeanCount) {
+  LightmapBakeSettings s = smallSettings();
+  s.samplesPerTexel = 64;
+  s.bounceCacheSamples = 16;
+  s.adaptiveSamples = true;
+  s.threads = 1;
+  auto a = bakeBlockFoot(s, 2);
+  s.threads = 2;
+  auto b = bakeBlockFoot(s, 2);
+  ASSERT_TRUE(a.ok()) << a.error();
+  ASSERT_TRUE(b.ok()) << b.error();
+  const AtlasObject& ao = a->layout.objects[0];
+  const LightmapPageResult& page = a->pages[size_t(ao.lightmapIndex)];
+  std::vector<double> perColumn(9, 0.0);
+  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+    for (int k = 0; k <= 8; ++k) {
+      const size_t i = size_t(y) * page.light.width + ao.texelMin.x + k;
+      perColumn[size_t(k)] += page.samples[i] / double(ao.texelSize.y);
+    }
+  std::printf("adaptive allocation, mean paths per texel by column (block face in column 8):");
+  for (double c : perColumn) std::printf(" %.0f", c);
+  std::printf("; mean %.2f, min %u, max %u\n", a->stats.meanSamples, a->stats.minSamples,
+              a->stats.maxSamples);
+  EXPECT_GT(perColumn[8], 1.25 * perColumn[0]);  // measured 101 against 70
+  EXPECT_NEAR(a->stats.meanSamples, 64.0, 1.0);
+  EXPECT_GE(a->stats.minSamples, 32u);
+  EXPECT_LE(a->stats.maxSamples, 512u);
+  EXPECT_LT(a->stats.minSamples, a->stats.maxSamples);
   ASSERT_EQ(a->pages.size(), b->pages.size());
   for (size_t p = 0; p < a->pages.size(); ++p) {
     EXPECT_EQ(a->pages[p].light.pixels, b->pages[p].light.pixels);

@@ -40,6 +40,7 @@ struct BakeOptions {
   std::optional<int> samples;
   std::optional<float> errorTarget;
   std::optional<int> bounceCache;
+  bool adaptive = false;
   bool coverageMap = false;
   bool footprintGrid = false;
   std::optional<float> resolution;
@@ -200,6 +201,7 @@ int runBake(const BakeOptions& o) {
   }
   if (o.errorTarget) settings.errorTarget = *o.errorTarget;
   if (o.bounceCache) settings.bounceCacheSamples = *o.bounceCache;
+  if (o.adaptive) settings.adaptiveSamples = true;
   if (o.coverageMap) settings.coverageMap = true;
   if (o.footprintGrid) settings.footprintGrid = true;
   if (o.resolution) settings.resolution = *o.resolution;
@@ -313,6 +315,9 @@ void registerBakeCommand(CLI::App& app) {
                 "Final gather: a first pass of this many paths per texel, whose light the "
                 "bake's paths read at their first hit instead of tracing on; 0 = off")
       ->check(CLI::Range(0, 1 << 24));
+  b->add_flag("--adaptive", o->adaptive,
+              "With --bounce-cache: the same paths in total, given to texels in proportion to "
+              "the spread the first pass measured (--samples on average, up to 8x)");
   b->add_flag("--footprint-grid", o->footprintGrid,
               "Texels next to geometry average the visible part of their footprint (4 x 4 "
               "points; experimental: mixes both sides of thin walls)");
