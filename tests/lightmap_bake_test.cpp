@@ -291,13 +291,14 @@ TEST(LightmapBake, BounceCacheKeepsTheMeanOfFullPaths) {
   s.bounceCacheSamples = 8;
   auto cached = bakeLightmaps(scene, s);
   ASSERT_TRUE(cached.ok()) << cached.error();
-  double sumFull = 0.0, sumCached = 0.0;
-  forValidTexels(*full, [&](const LightmapPageResult& page, size_t i) {
-    sumFull += luminance(texel(page.light, i));
-  });
-  forValidTexels(*cached, [&](const LightmapPageResult& page, size_t i) {
-    sumCached += luminance(texel(page.light, i));
-  });
+  auto sumLuminance = [](const LightmapBakeResult& r) {
+    double sum = 0.0;
+    forValidTexels(r, [&](const LightmapPageResult& page, size_t i) {
+      sum += luminance(texel(page.light, i));
+    });
+    return sum;
+  };
+  const double sumFull = sumLuminance(*full), sumCached = sumLuminance(*cached);
   std::printf("cornell at 28 texels/unit: mean ratio cached / full %.4f; rays %.2f M vs %.2f M\n",
               sumCached / sumFull, double(cached->stats.rays) / 1e6,
               double(full->stats.rays) / 1e6);
@@ -483,6 +484,29 @@ Result<LightmapBakeResult> bakeBlockFoot(LightmapBakeSettings s, int bounces = 0
   return bakeLightmaps(scene, s);
 }
 
+// Mean paths per texel of the quad's columns 0..8 (the block's face is in column 8).
+std::vector<double> meanPathsByColumn(const LightmapBakeResult& r) {
+  const AtlasObject& ao = r.layout.objects[0];
+  const LightmapPageResult& page = r.pages[size_t(ao.lightmapIndex)];
+  std::vector<double> perColumn(9, 0.0);
+  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+    for (int k = 0; k <= 8; ++k) {
+      const size_t i = size_t(y) * page.light.width + ao.texelMin.x + k;
+      perColumn[size_t(k)] += page.samples[i] / double(ao.texelSize.y);
+    }
+  return perColumn;
+}
+
+// Two bakes of the same settings at different thread counts: the same light, paths and rays.
+void expectSameLightAndPaths(const LightmapBakeResult& a, const LightmapBakeResult& b) {
+  ASSERT_EQ(a.pages.size(), b.pages.size());
+  for (size_t p = 0; p < a.pages.size(); ++p) {
+    EXPECT_EQ(a.pages[p].light.pixels, b.pages[p].light.pixels);
+    EXPECT_EQ(a.pages[p].samples, b.pages[p].samples);
+  }
+  EXPECT_EQ(a.stats.rays, b.stats.rays);
+}
+
 TEST(LightmapBake, HiddenEdgeTexelHoldsTheVisibleFootprintAverage) {
   // Column k = 8 of the quad covers x in [1, 1.125]; the block (0.5 m above the quad) hides
   // x > 1.05. A point at distance s from the block's face sees the sky except the face:
@@ -535,26 +559,14 @@ TEST(LightmapBake, AdaptiveSamplingSpendsPathsWherePathsDisagree) {
   auto b = bakeBlockFoot(s);
   ASSERT_TRUE(a.ok()) << a.error();
   ASSERT_TRUE(b.ok()) << b.error();
-  const AtlasObject& ao = a->layout.objects[0];
-  const LightmapPageResult& page = a->pages[size_t(ao.lightmapIndex)];
-  std::vector<double> perColumn(9, 0.0);
-  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
-    for (int k = 0; k <= 8; ++k) {
-      const size_t i = size_t(y) * page.light.width + ao.texelMin.x + k;
-      perColumn[size_t(k)] += page.samples[i] / double(ao.texelSize.y);
-    }
+  const std::vector<double> perColumn = meanPathsByColumn(*a);
   std::printf("mean paths per texel by column (block face in column 8):");
   for (double c : perColumn) std::printf(" %.0f", c);
   std::printf("\n");
   EXPECT_GT(perColumn[8], 2.0 * perColumn[0]);
   EXPECT_LT(a->stats.minSamples, a->stats.maxSamples);
   EXPECT_LT(a->stats.meanSamples, 0.5 * 4096.0);
-  ASSERT_EQ(a->pages.size(), b->pages.size());
-  for (size_t p = 0; p < a->pages.size(); ++p) {
-    EXPECT_EQ(a->pages[p].light.pixels, b->pages[p].light.pixels);
-    EXPECT_EQ(a->pages[p].samples, b->pages[p].samples);
-  }
-  EXPECT_EQ(a->stats.rays, b->stats.rays);
+  expectSameLightAndPaths(*a, *b);
 }
 
 // Neyman allocation from the bounce cache's first pass (settings.adaptiveSamples): the same
@@ -575,14 +587,7 @@ TEST(LightmapBake, AdaptiveAllocationFromTheBounceCacheKeepsTheMeanCount) {
   auto b = bakeBlockFoot(s, 2);
   ASSERT_TRUE(a.ok()) << a.error();
   ASSERT_TRUE(b.ok()) << b.error();
-  const AtlasObject& ao = a->layout.objects[0];
-  const LightmapPageResult& page = a->pages[size_t(ao.lightmapIndex)];
-  std::vector<double> perColumn(9, 0.0);
-  for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
-    for (int k = 0; k <= 8; ++k) {
-      const size_t i = size_t(y) * page.light.width + ao.texelMin.x + k;
-      perColumn[size_t(k)] += page.samples[i] / double(ao.texelSize.y);
-    }
+  const std::vector<double> perColumn = meanPathsByColumn(*a);
   std::printf("adaptive allocation, mean paths per texel by column (block face in column 8):");
   for (double c : perColumn) std::printf(" %.0f", c);
   std::printf("; mean %.2f, min %u, max %u\n", a->stats.meanSamples, a->stats.minSamples,
@@ -592,12 +597,7 @@ TEST(LightmapBake, AdaptiveAllocationFromTheBounceCacheKeepsTheMeanCount) {
   EXPECT_GE(a->stats.minSamples, 32u);
   EXPECT_LE(a->stats.maxSamples, 512u);
   EXPECT_LT(a->stats.minSamples, a->stats.maxSamples);
-  ASSERT_EQ(a->pages.size(), b->pages.size());
-  for (size_t p = 0; p < a->pages.size(); ++p) {
-    EXPECT_EQ(a->pages[p].light.pixels, b->pages[p].light.pixels);
-    EXPECT_EQ(a->pages[p].samples, b->pages[p].samples);
-  }
-  EXPECT_EQ(a->stats.rays, b->stats.rays);
+  expectSameLightAndPaths(*a, *b);
 }
 
 TEST(LightmapBake, BitIdenticalAtAnyThreadCount) {
