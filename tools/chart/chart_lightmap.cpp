@@ -287,7 +287,7 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
 
   ChartTable t;
   t.name = "lightmap_adaptive";
-  t.title = "Lightmap: bake time vs error, fixed samples vs adaptive (cornell_box, denoised)";
+  t.title = "Lightmap: bake time vs error, fixed, adaptive and gather (cornell_box, denoised)";
   t.columns = {"variant", "error_target", "mean_samples", "relative_rms_error", "mean_ratio",
                "bake_seconds", "rays", "repeats", "reference_samples"};
   for (size_t v = 0; v < variants.size(); ++v) {
