@@ -49,7 +49,7 @@ constexpr double kVisibleRatioBound = 0.01;
 #else
 // The cost target: a final gather over a bounce cache (8 full paths per texel, then
 // 256 paths per texel that end at their first hit), the footprint grid at hidden edges, no
-// denoiser, 140 texels per metre: 19 M rays, 4.5 CPU s on the 2-core build machine, a
+// denoiser, 140 texels per metre: 19 M rays, 4.1 CPU s on the 2-core build machine, a
 // tenth of the 49 CPU s Cycles needs for 1%. Measured 0.90% and 1.0000 over all texels,
 // 0.69% and 0.9999 away from hidden ones (seed 0). The bounds are the (1% RMSE, 0.3%
 // bias) over all texels; Embree's kernels differ between machines, and a re-seeded bake
