@@ -233,6 +233,13 @@ int runBake(const BakeOptions& o) {
     if (int code = lockAtlas(o, scene, settings)) return code;
 
   // Settings that cannot work together (each alone is range-checked by CLI11 or the loader).
+  if (settings.adaptiveSamples &&
+      (settings.bounceCacheSamples == 0 || settings.errorTarget > 0.0f)) {
+    printError(std::string("--adaptive allocates paths by the bounce cache's first pass: it "
+                           "needs --bounce-cache N (N >= 1)") +
+               (settings.errorTarget > 0.0f ? " and no --error-target" : ""));
+    return kExitBadUsage;
+  }
   if (settings.maxSize < 1 + 2 * settings.padding) {
     printError("--max-size " + std::to_string(settings.maxSize) + " cannot hold one texel with " +
                "--padding " + std::to_string(settings.padding) +
