@@ -181,29 +181,6 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
   return rays;
 }
 
-// Whether point p lies inside a closed solid: most of kPushDirections rays along its
-// surface's tangent plane (any length) hit the back of a single-sided surface. A floor under
-// a block is; a ceiling 1 mm above a single-sided lamp is not (its tangent rays pass the
-// lamp and reach the room's walls from the front). Adds the rays traced to `rays`.
-bool insideSolid(const Scene& scene, const Tracer& tracer, uint32_t object, const TexelPoint& p,
-                 uint64_t& rays) {
-  const vec3 ng = scene.objects[object].faceNormal(p.triangle);
-  if (!(glm::dot(ng, ng) > 0.0f)) return false;
-  const Frame frame = Frame::fromNormal(ng);
-  const vec3 origin = offsetRayOrigin(p.position, ng);
-  int backs = 0;
-  for (int d = 0; d < kPushDirections; ++d) {
-    const float phi = 2.0f * kPi * float(d) / float(kPushDirections);
-    const vec3 dir = std::cos(phi) * frame.t + std::sin(phi) * frame.b;
-    ++rays;
-    const auto hit = tracer.intersect(Ray{origin, dir, 0.0f, kInfinity});
-    if (!hit || !hit->backFace) continue;
-    const Material& m = scene.materialOf(hit->object, hit->triangle);
-    if (!m.doubleSided && m.alphaMode != AlphaMode::Blend) ++backs;
-  }
-  return 2 * backs > kPushDirections;
-}
-
 // Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
 bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                   const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
@@ -348,8 +325,6 @@ struct TexelLight {
   // points inside geometry included at their own (dark) estimate; the visible share of the
   // footprint on a footprint grid, 1 elsewhere (LightmapPageResult::coverage).
   float coverage = 1.0f;
-  // Its points lie inside a solid (push-out moved them all): the footprint is hidden.
-  bool insideSolid = false;
   // One of its points lies on the visible surface where it was rasterized (not inside a
   // solid, not moved by push-out): bilinear lookups at visible points read this texel.
   bool onVisibleSurface = false;
@@ -607,7 +582,6 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
   // each at its own estimate (0 for a point inside a solid), over the value stored. On a
   // footprint grid that is the visible share when the points inside see nothing.
   out.coverage = 1.0f;
-  out.insideSolid = footprintGrid ? visibleGridPoints == 0 : pointCount == 1 && points[0].pushedOut;
   if (footprintGrid && visibleGridPoints == 0) out.coverage = 0.0f;  // all inside a solid
   if (footprintGrid && visibleGridPoints > 0) {
     double footprint = 0.0;
@@ -739,9 +713,6 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
           if (s.texelSamples) texelSettings.samples = std::max((*s.texelSamples)[i], count);
           out[i] = lightTexel(integrator, texelSettings, key, points, count,
                               texel.footprintGrid, reach, extraRays);
-          if (!out[i].valid && !out[i].insideSolid)
-            out[i].insideSolid = insideSolid(integrator.scene(), integrator.tracer(),
-                                             uint32_t(texel.object), texel.sample, extraRays);
           out[i].rays = Integrator::threadRayCount() + extraRays - texelStart;
         }
         rays += Integrator::threadRayCount() - before + extraRays;
