@@ -31,8 +31,10 @@
 #include "lightmap/lightmap_baker.h"
 
 #include <array>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 
 #include "lightmap/directional.h"
 #include "lightmap/postprocess.h"
@@ -50,6 +52,7 @@ constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
 constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
 constexpr uint64_t kEnclosureTag = 0x656e;  // "en": enclosure rays' stream
 constexpr uint64_t kFloorTag = 0x666c;  // "fl": the error floor's pre-pass
+constexpr uint64_t kCacheTag = 0x6263;  // "bc": the bounce cache's first pass
 // Error floor pre-pass: paths at every kFloorStride-th texel.
 constexpr size_t kFloorStride = 16;
 constexpr uint32_t kFloorSamples = 16;
@@ -69,6 +72,8 @@ constexpr float kPushReachTexels = 1.0f;
 constexpr int kPushPasses = 2;
 // Footprint grid of texels next to geometry: n x n points (stage 4b).
 constexpr int kFootprintGrid = 4;
+// Adaptive sampling (allocateSamples): no texel takes more than this many times the mean.
+constexpr uint32_t kAdaptiveCap = 8;
 
 Status validate(const LightmapBakeSettings& s) {
   auto bad = [](const std::string& what) { return Status(Error{"lightmap bake: " + what}); };
@@ -89,6 +94,9 @@ Status validate(const LightmapBakeSettings& s) {
                std::to_string(s.supersampling * s.supersampling) +
                " points per texel (every point needs a sample)");
   if (s.bounces < 0) return bad("bounces must be >= 0 (got " + std::to_string(s.bounces) + ")");
+  if (s.bounceCacheSamples < 0)
+    return bad("bounceCacheSamples must be >= 0 (got " + std::to_string(s.bounceCacheSamples) +
+               ")");
   if (!(s.albedoBoost > 0.0f))
     return bad("albedoBoost must be > 0 (got " + std::to_string(s.albedoBoost) + ")");
   if (!(s.indirectIntensity >= 0.0f))
@@ -173,29 +181,6 @@ uint32_t pushOutPoint(const Scene& scene, const Tracer& tracer, uint32_t object,
   return rays;
 }
 
-// Whether point p lies inside a closed solid: most of kPushDirections rays along its
-// surface's tangent plane (any length) hit the back of a single-sided surface. A floor under
-// a block is; a ceiling 1 mm above a single-sided lamp is not (its tangent rays pass the
-// lamp and reach the room's walls from the front). Adds the rays traced to `rays`.
-bool insideSolid(const Scene& scene, const Tracer& tracer, uint32_t object, const TexelPoint& p,
-                 uint64_t& rays) {
-  const vec3 ng = scene.objects[object].faceNormal(p.triangle);
-  if (!(glm::dot(ng, ng) > 0.0f)) return false;
-  const Frame frame = Frame::fromNormal(ng);
-  const vec3 origin = offsetRayOrigin(p.position, ng);
-  int backs = 0;
-  for (int d = 0; d < kPushDirections; ++d) {
-    const float phi = 2.0f * kPi * float(d) / float(kPushDirections);
-    const vec3 dir = std::cos(phi) * frame.t + std::sin(phi) * frame.b;
-    ++rays;
-    const auto hit = tracer.intersect(Ray{origin, dir, 0.0f, kInfinity});
-    if (!hit || !hit->backFace) continue;
-    const Material& m = scene.materialOf(hit->object, hit->triangle);
-    if (!m.doubleSided && m.alphaMode != AlphaMode::Blend) ++backs;
-  }
-  return 2 * backs > kPushDirections;
-}
-
 // Stage 4: every sample point of every covered texel, pushed out of nearby geometry.
 bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                   const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
@@ -224,16 +209,37 @@ bool pushOutStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& t
   return done;
 }
 
+// Whether covered texel `index` of `page` has an 8-neighbour of its own object whose
+// validity (per page, W x H, from the bounce cache's first pass) differs from its own: a
+// hidden edge (the lamp's outline on the ceiling behind it) runs through or beside it.
+bool onValidityEdge(const RasterPage& page, const std::vector<uint8_t>& validity, size_t index) {
+  const int w = page.width, h = page.height;
+  const int x = int(index % size_t(w)), y = int(index / size_t(w));
+  const int32_t object = page.texels[index].object;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int nx = x + dx, ny = y + dy;
+      if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+      const size_t n = size_t(ny) * size_t(w) + size_t(nx);
+      if (page.texels[n].object == object && validity[n] != validity[index]) return true;
+    }
+  return false;
+}
+
 // Stage 4b: texels next to geometry (a sample point push-out moved, or a tangent-plane ray
-// that hit a surface within a texel) get a kFootprintGrid^2 grid of points over their
-// footprint (at least the supersampling grid), pushed out like the others; the points found
-// inside a solid are the hidden part of the footprint, left out of the texel's value
-// (lightTexel). Texels elsewhere keep their points: nothing within a texel of them can hide
-// part of their footprint.
+// that hit a surface within a texel) and, when the bounce cache's first pass gave each
+// texel's validity (`validity`, per page, else null), texels on an edge between valid and
+// invalid texels get a kFootprintGrid^2 grid of points over their footprint (at least the
+// supersampling grid), pushed out like the others; the points found inside a solid (or,
+// in lightTexel, seeing back faces) are the hidden part of the footprint, left out of the
+// texel's value. Texels elsewhere keep their points: nothing within a texel of them can
+// hide part of their footprint. The validity edge finds what push-out's tangent-plane rays
+// cannot: a surface hidden behind a parallel one (the ceiling 1 mm above the lamp).
 bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                     const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
-                    int supersampling, bool showProgress, ParallelOptions options,
-                    std::atomic<uint64_t>& rays, std::string& error) {
+                    int supersampling, const std::vector<std::vector<uint8_t>>* validity,
+                    bool showProgress, ParallelOptions options, std::atomic<uint64_t>& rays,
+                    std::string& error) {
   std::vector<std::vector<uint8_t>> masks(pages.size());
   for (size_t p = 0; p < pages.size(); ++p) masks[p].assign(pages[p].texels.size(), 0);
   size_t flagged = 0;
@@ -245,6 +251,7 @@ bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>&
       const TexelPoint& q = page.subsamples[texel.firstSubsample + s];
       near = q.nearSurface || q.pushedOut;
     }
+    near = near || (validity && onValidityEdge(page, (*validity)[t.page], t.index));
     masks[t.page][t.index] = near ? 1 : 0;
     flagged += near ? 1 : 0;
   }
@@ -318,8 +325,6 @@ struct TexelLight {
   // points inside geometry included at their own (dark) estimate; the visible share of the
   // footprint on a footprint grid, 1 elsewhere (LightmapPageResult::coverage).
   float coverage = 1.0f;
-  // Its points lie inside a solid (push-out moved them all): the footprint is hidden.
-  bool insideSolid = false;
   // One of its points lies on the visible surface where it was rasterized (not inside a
   // solid, not moved by push-out): bilinear lookups at visible points read this texel.
   bool onVisibleSurface = false;
@@ -357,6 +362,9 @@ struct LightSettings {
   float aoMaxDistance = 1.0f;
   bool directional = false;
   const ChannelLights* shadowmask = nullptr;  // null: no shadowmask
+  // Per covered texel (index-aligned with the light stage's texels), its paths instead of
+  // `samples` (allocateSamples); null = `samples` everywhere.
+  const std::vector<uint32_t>* texelSamples = nullptr;
 };
 
 // Running sums over sample points (each term x the point's sample count).
@@ -574,7 +582,6 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
   // each at its own estimate (0 for a point inside a solid), over the value stored. On a
   // footprint grid that is the visible share when the points inside see nothing.
   out.coverage = 1.0f;
-  out.insideSolid = footprintGrid ? visibleGridPoints == 0 : pointCount == 1 && points[0].pushedOut;
   if (footprintGrid && visibleGridPoints == 0) out.coverage = 0.0f;  // all inside a solid
   if (footprintGrid && visibleGridPoints > 0) {
     double footprint = 0.0;
@@ -684,8 +691,8 @@ double meanTexelLuminance(const std::vector<RasterPage>& pages,
 bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                 const Integrator& integrator, const LightSettings& s, bool showProgress,
                 ParallelOptions options, std::vector<TexelLight>& out,
-                std::atomic<uint64_t>& rays) {
-  Progress progress("bake", texels.size(), "texels", showProgress);
+                std::atomic<uint64_t>& rays, const char* phase = "bake") {
+  Progress progress(phase, texels.size(), "texels", showProgress);
   options.progress = &progress;
   options.grain = 4;
   out.assign(texels.size(), TexelLight{});
@@ -702,11 +709,10 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
           const uint64_t texelStart = Integrator::threadRayCount() + extraRays;
-          out[i] = lightTexel(integrator, s, key, points, count, texel.footprintGrid, reach,
-                              extraRays);
-          if (!out[i].valid && !out[i].insideSolid)
-            out[i].insideSolid = insideSolid(integrator.scene(), integrator.tracer(),
-                                             uint32_t(texel.object), texel.sample, extraRays);
+          LightSettings texelSettings = s;
+          if (s.texelSamples) texelSettings.samples = std::max((*s.texelSamples)[i], count);
+          out[i] = lightTexel(integrator, texelSettings, key, points, count,
+                              texel.footprintGrid, reach, extraRays);
           out[i].rays = Integrator::threadRayCount() + extraRays - texelStart;
         }
         rays += Integrator::threadRayCount() - before + extraRays;
@@ -819,16 +825,13 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
     progress.fill.advance(n);
   }
   // A filled texel holds its neighbours' light for bilinear lookups at visible points; its
-  // footprint weight brings it back to its own estimate (~0 inside geometry).
-  // Only inside a solid: an invalid texel outside one (a ceiling 1 mm above a single-sided
-  // lamp, whose back faces end kiln's paths) has no estimate of its own worth more than the
-  // fill (an independent renderer that shades back faces lets light into such a slit).
-  std::vector<uint8_t> insideSolid(settings.coverageMap ? n : 0, 0);
-  for (size_t i = 0; i < texels.size() && settings.coverageMap; ++i)
-    if (texels[i].page == pageIndex) insideSolid[texels[i].index] = light[i].insideSolid;
+  // footprint weight brings it back to its own estimate: ~0 inside a solid, and ~0 on a
+  // surface behind a single-sided one, such as the ceiling 1 mm above the Cornell box's lamp
+  // (kiln's paths end on the lamp's back; Cycles' reference is as dark there, 2e-4 of the
+  // ceiling beside the lamp one reference texel in).
   if (settings.coverageMap)
     for (size_t t = 0; t < n; ++t) {
-      if (page.objectId[t] < 0 || page.valid[t] || !insideSolid[t]) continue;
+      if (page.objectId[t] < 0 || page.valid[t]) continue;
       const float* f = page.radiance.at(int(t % size_t(w)), int(t / size_t(w)));
       const float* q = physical.at(int(t % size_t(w)), int(t / size_t(w)));
       const float filledLum = luminance(vec3(f[0], f[1], f[2]));
@@ -932,6 +935,154 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   }
 }
 
+// The first pass's pages as a BounceCache: a hit's lightmap UV through its object's
+// scaleOffset to its page, read bilinearly between texel centres (the pages are dilated into
+// their padding, so a read at a chart's border takes no black).
+class LightmapBounceCache final : public BounceCache {
+ public:
+  LightmapBounceCache(const Scene& scene, const AtlasLayout& layout, std::vector<Image> pages)
+      : scene_(scene), layout_(layout), pages_(std::move(pages)) {}
+
+  bool lookup(uint32_t object, uint32_t triangle, vec2 bary, vec3& value) const override {
+    const AtlasObject& a = layout_.objects[object];
+    if (a.lightmapIndex < 0) return false;
+    const Object& o = scene_.objects[object];
+    if (o.uv1.empty()) return false;
+    const Image& page = pages_[size_t(a.lightmapIndex)];
+    const uvec3 t = o.triangles[triangle];
+    const vec2 uv = (1.0f - bary.x - bary.y) * o.uv1[t.x] + bary.x * o.uv1[t.y] +
+                    bary.y * o.uv1[t.z];
+    const float x = (uv.x * a.scaleOffset.x + a.scaleOffset.z) * float(page.width) - 0.5f;
+    const float y = (uv.y * a.scaleOffset.y + a.scaleOffset.w) * float(page.height) - 0.5f;
+    const float fx = std::floor(x), fy = std::floor(y);
+    const float tx = x - fx, ty = y - fy;
+    const int x0 = std::clamp(int(fx), 0, page.width - 1);
+    const int y0 = std::clamp(int(fy), 0, page.height - 1);
+    const int x1 = std::min(x0 + 1, page.width - 1), y1 = std::min(y0 + 1, page.height - 1);
+    value = (1.0f - ty) * ((1.0f - tx) * page.rgb(x0, y0) + tx * page.rgb(x1, y0)) +
+            ty * ((1.0f - tx) * page.rgb(x0, y1) + tx * page.rgb(x1, y1));
+    return true;
+  }
+
+ private:
+  const Scene& scene_;
+  const AtlasLayout& layout_;
+  std::vector<Image> pages_;
+};
+
+// The final gather's first pass (LightmapBakeSettings::bounceCacheSamples): every texel's
+// light as a bounce sees it (IntegratorSettings::bounceView, one bounce fewer, no
+// indirectIntensity), from `samples` full paths on its own stream, post-processed like the
+// light pages (invalid texels filled, dilated, stitched; not denoised, see below) so that a
+// read anywhere on a visible surface finds the light there. `validity` receives each texel's validity from
+// this pass (per page, W x H). Returns null when cancelled.
+std::unique_ptr<LightmapBounceCache> bounceCachePass(
+    std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels, const Scene& scene,
+    const AtlasLayout& layout, const Tracer& tracer, IntegratorSettings is,
+    const LightmapBakeSettings& settings, bool showProgress, ParallelOptions parallel,
+    std::atomic<uint64_t>& rays, std::vector<std::vector<uint8_t>>& validity,
+    std::vector<float>& pathSpread) {
+  is.bounceView = true;
+  is.indirectIntensity = 1.0f;
+  is.maxBounces = std::max(0, is.maxBounces - 1);
+  is.bounceCache = nullptr;
+  const Integrator integrator(scene, tracer, is);
+  LightSettings ls;
+  ls.samples = uint32_t(settings.bounceCacheSamples);
+  ls.supersampling = 1;
+  ls.seed = hashValues(settings.seed, kCacheTag);
+  ls.backfaceTolerance = settings.backfaceTolerance;
+  ls.enclosedTexels = settings.enclosedTexels;
+  ls.layout = &layout;
+  std::vector<TexelLight> light;
+  if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays, "bounce cache"))
+    return nullptr;
+  pathSpread.assign(texels.size(), -1.0f);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (light[i].valid) pathSpread[i] = std::sqrt(light[i].variance * float(light[i].samples));
+  validity.resize(pages.size());
+  for (size_t p = 0; p < pages.size(); ++p) validity[p].assign(pages[p].texels.size(), 0);
+  for (size_t i = 0; i < texels.size(); ++i)
+    validity[texels[i].page][texels[i].index] = light[i].valid ? 1 : 0;
+  LightmapBakeSettings post = settings;
+  post.ambientOcclusion = false;
+  post.directional = false;
+  post.coverageMap = false;
+  // Not denoised: a gather reads the cache over the whole hemisphere, i.e. averages many
+  // texels, which does what the denoiser would (Cornell box, --resolution 200: 1.01% RMSE
+  // against Cycles with the cache denoised or not) at none of its cost (as much CPU as the
+  // rest of the bake).
+  post.denoise = false;
+  std::vector<Image> images(pages.size());
+  PostProgress progress(0, 0, 0, false);
+  size_t clamped = 0;
+  for (uint32_t p = 0; p < pages.size(); ++p) {
+    LightmapPageResult page;
+    postPage(scene, layout, p, pages[p], texels, light, post, false, parallel, progress, page,
+             clamped);
+    images[p] = std::move(page.light);
+    if (cancelled(parallel.cancel)) return nullptr;
+  }
+  return std::make_unique<LightmapBounceCache>(scene, layout, std::move(images));
+}
+
+// Adaptive sampling (LightmapBakeSettings::adaptiveSamples): paths per texel in proportion
+// to the spread of one path's value there, Neyman's allocation, which minimises the summed
+// squared error of the texels for a given total of paths (sum sigma_t^2 / n_t subject to
+// sum n_t = N: n_t ~ sigma_t). The spread comes from the bounce cache's first pass, whose
+// random numbers are its own: a texel's count does not depend on the paths that make its
+// value, so stopping where a few paths happened to agree cannot bias it dark (what sinks a
+// per-texel stopping rule). Each spread is the mean over the valid texels of its object
+// among its 3 x 3 neighbours (the first pass has few paths per texel; invalid texels say
+// nothing about the light beside them). The counts are clamped to [mean / 2,
+// cap] and scaled (bisection on the factor) so that their sum is mean x texels; computed in
+// texel order, so the same at any thread count.
+std::vector<uint32_t> allocateSamples(const std::vector<RasterPage>& pages,
+                                      const std::vector<TexelRef>& texels,
+                                      const std::vector<float>& pathSpread, uint32_t mean,
+                                      uint32_t cap) {
+  std::vector<std::vector<int32_t>> where(pages.size());  // texel -> index in `texels`
+  for (size_t p = 0; p < pages.size(); ++p) where[p].assign(pages[p].texels.size(), -1);
+  for (size_t i = 0; i < texels.size(); ++i) where[texels[i].page][texels[i].index] = int32_t(i);
+  std::vector<double> spread(texels.size(), 0.0);
+  for (size_t i = 0; i < texels.size(); ++i) {
+    const RasterPage& page = pages[texels[i].page];
+    const int w = page.width, h = page.height;
+    const int x = int(texels[i].index % uint32_t(w)), y = int(texels[i].index / uint32_t(w));
+    double sum = 0.0;
+    int n = 0;
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int nx = x + dx, ny = y + dy;
+        if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+        const int32_t j = where[texels[i].page][size_t(ny) * size_t(w) + size_t(nx)];
+        if (j < 0 || pathSpread[size_t(j)] < 0.0f ||
+            page.texels[texels[size_t(j)].index].object != page.texels[texels[i].index].object)
+          continue;
+        sum += pathSpread[size_t(j)];
+        ++n;
+      }
+    spread[i] = n > 0 ? sum / n : 0.0;
+  }
+  const uint32_t lo = std::max(1u, mean / 2);
+  const double target = double(mean) * double(texels.size());
+  auto total = [&](double k) {
+    double t = 0.0;
+    for (double s : spread) t += std::clamp(std::round(k * s), double(lo), double(cap));
+    return t;
+  };
+  double kLo = 0.0, kHi = 1.0;
+  while (total(kHi) < target && kHi < 1e30) kHi *= 2.0;
+  for (int it = 0; it < 60; ++it) {
+    const double k = 0.5 * (kLo + kHi);
+    (total(k) < target ? kLo : kHi) = k;
+  }
+  std::vector<uint32_t> counts(texels.size());
+  for (size_t i = 0; i < texels.size(); ++i)
+    counts[i] = uint32_t(std::clamp(std::round(kLo * spread[i]), double(lo), double(cap)));
+  return counts;
+}
+
 }  // namespace
 
 Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& settings) {
@@ -1019,14 +1170,9 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
                     rays) ||
       cancelled(cancel))
     return Error{"cancelled"};
-  std::string footprintError;
-  if ((settings.footprintGrid &&
-       !footprintStage(pages, texels, result.scene, result.layout, **tracer,
-                       settings.supersampling, showProgress, parallel, rays, footprintError)) ||
-      cancelled(cancel))
-    return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};
 
-  // Stage 5: light.
+  // Stage 5: light (with a bounce cache, its first pass, then the footprint grid, which uses
+  // that pass's validity, then the light stage).
   result.lightModes = planLightModes(result.scene, settings.lightingMode);
   for (const std::string& w : result.lightModes.warnings) result.warnings.push_back(w);
   const ChannelLights shadowmaskLights = channelLights(result.lightModes);
@@ -1038,6 +1184,23 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   is.maxBounces = settings.bounces;
   is.albedoBoost = settings.albedoBoost;
   is.indirectIntensity = settings.indirectIntensity;
+  std::unique_ptr<LightmapBounceCache> bounceCache;
+  std::vector<std::vector<uint8_t>> cacheValidity;
+  std::vector<float> pathSpread;
+  if (settings.bounceCacheSamples > 0 && settings.bounces > 0) {
+    bounceCache = bounceCachePass(pages, texels, result.scene, result.layout, **tracer, is,
+                                  settings, showProgress, parallel, rays, cacheValidity,
+                                  pathSpread);
+    if (!bounceCache || cancelled(cancel)) return Error{"cancelled"};
+    is.bounceCache = bounceCache.get();
+  }
+  std::string footprintError;
+  if ((settings.footprintGrid &&
+       !footprintStage(pages, texels, result.scene, result.layout, **tracer,
+                       settings.supersampling, bounceCache ? &cacheValidity : nullptr,
+                       showProgress, parallel, rays, footprintError)) ||
+      cancelled(cancel))
+    return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};
   const Integrator integrator(result.scene, **tracer, is);
   LightSettings ls;
   ls.samples = uint32_t(settings.samplesPerTexel);
@@ -1058,6 +1221,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.layout = &result.layout;
   ls.directional = settings.directional;
   ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
+  std::vector<uint32_t> texelSamples;
+  if (settings.adaptiveSamples && bounceCache && !(settings.errorTarget > 0.0f)) {
+    texelSamples = allocateSamples(pages, texels, pathSpread, ls.samples,
+                                   ls.samples * kAdaptiveCap);
+    ls.texelSamples = &texelSamples;
+  }
   std::vector<TexelLight> light;
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
       cancelled(cancel))

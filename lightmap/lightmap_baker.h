@@ -59,6 +59,18 @@ struct LightmapBakeSettings {
   int minSamples = 32;
   float errorFloor = 0.1f;
   int supersampling = 1;      // n x n sample points per texel
+  // Final gather (lightmap_baker.cpp, bounceCachePass): > 0 = a first pass bakes every
+  // texel with this many full paths (post-processed like the light: filled, dilated,
+  // stitched), and the paths of the light stage end at their first hit, where they read that
+  // pass's light (x the albedo) instead of tracing on. Each path then costs about two rays
+  // instead of five and carries far less variance, for a small bias from the first pass's
+  // texel size. 0 = independent full paths per texel.
+  int bounceCacheSamples = 0;
+  // With a bounce cache (and no errorTarget): the light stage's paths go to the texels in
+  // proportion to the spread of one path's value that the first pass measured around each
+  // (Neyman allocation, lightmap_baker.cpp allocateSamples): samplesPerTexel on average,
+  // between half of it and 8x. false = samplesPerTexel at every texel.
+  bool adaptiveSamples = false;
   uint64_t seed = 0;
   // Light transport (see IntegratorSettings).
   // Bounce cap. Russian roulette (IntegratorSettings) ends most paths long before it, so a

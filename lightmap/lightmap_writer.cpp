@@ -138,6 +138,8 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["samplesPerTexel"] = s.samplesPerTexel;
   j["supersampling"] = s.supersampling;
   j["errorTarget"] = shortestDecimal(s.errorTarget);
+  j["bounceCacheSamples"] = s.bounceCacheSamples;
+  j["adaptiveSamples"] = s.adaptiveSamples;
   j["minSamples"] = s.minSamples;
   j["errorFloor"] = shortestDecimal(s.errorFloor);
   j["seed"] = s.seed;

@@ -279,13 +279,14 @@ vec3 Integrator::punctualIrradiance(vec3 x, vec3 ns, vec3 ng, bool atOrigin, Sha
                                     uint64_t key, uint32_t sampleIndex, uint32_t vertex,
                                     vec3* weightedDirection) const {
   vec3 sum(0.0f);
-  const auto& selection = atOrigin ? settings_.directLights : settings_.indirectLights;
+  const bool bounced = !atOrigin || settings_.bounceView;  // the lights a bounce sees
+  const auto& selection = bounced ? settings_.indirectLights : settings_.directLights;
   for (uint32_t i = 0; i < scene_.lights.size(); ++i) {
     if (!selection[i]) continue;
     const Light& l = scene_.lights[i];
     const bool soft = isSoft(l);
     if ((kind == ShadowKind::Hard && soft) || (kind == ShadowKind::Soft && !soft)) continue;
-    const float scale = atOrigin ? 1.0f : l.bounceIntensity;
+    const float scale = bounced ? l.bounceIntensity : 1.0f;
     if (!(scale > 0.0f)) continue;
     const vec3 e = l.irradianceAt(x);
     if (isBlack(e)) continue;
@@ -455,6 +456,15 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
     if (glm::dot(ns, ng) <= 0.0f) ns = ng;  // a shading normal past the horizon: don't trust it
     beta *= m.albedoTextured ? albedoAt(h.object, h.triangle, h.bary) : m.albedo;
     if (isBlack(beta)) return;
+    // Final gather: the first pass's light at the first hit (its front: a lightmap holds the
+    // front's light) stands for everything the rest of the path would have found there.
+    if (vertex == 1 && settings_.bounceCache && !h.backFace) {
+      vec3 cached(0.0f);
+      if (settings_.bounceCache->lookup(h.object, h.triangle, h.bary, cached)) {
+        indirect += beta * cached;
+        return;
+      }
+    }
 
     // NEE at this vertex: light reflected here has bounced at least once. Lambert's BRDF is
     // albedo / pi (albedo already in beta).

@@ -33,6 +33,22 @@
 
 namespace kiln {
 
+// Light a first, cheaper pass of a bake already computed, which later paths read instead of
+// tracing on (a final gather: Beast's and Lightmass's final gather over an irradiance cache,
+// Godot's and Enlighten's bounce from the previous pass's lightmap). The lightmap baker
+// implements it over its first-pass pages (lightmap_baker.cpp, LightmapBounceCache).
+class BounceCache {
+ public:
+  virtual ~BounceCache() = default;
+  // E / pi at the front of triangle `triangle` of `object` at Embree barycentrics `bary`,
+  // as a bounce sees it: the irradiance from the lights of IntegratorSettings::indirectLights
+  // (x bounceIntensity), emitters and the sky, plus indirect light with maxBounces - 1
+  // bounces, not x indirectIntensity (an Integrator with bounceView and indirectIntensity 1
+  // estimates it). Returns false where the cache holds nothing (an object without a
+  // lightmap): the path then goes on as without a cache.
+  virtual bool lookup(uint32_t object, uint32_t triangle, vec2 bary, vec3& value) const = 0;
+};
+
 struct IntegratorSettings {
   int maxBounces = 4;            // bounces of indirect light; 0 = direct light only
   int russianRouletteDepth = 2;  // bounces before Russian roulette starts
@@ -49,6 +65,13 @@ struct IntegratorSettings {
   // Whether Light::bakedShadows applies (lights that are not realtime). The preview renderer
   // turns it off for its run-time direct light, whose shadows are the engine's.
   bool honourBakedShadows = true;
+  // irradiance() counts at its point the lights a bounce sees (indirectLights, each x its
+  // bounceIntensity) instead of directLights: the estimate a BounceCache holds.
+  bool bounceView = false;
+  // When set, a path's first hit on the front of a surface the cache covers ends the path:
+  // the light reflected there is albedo x the cached E / pi (no NEE, no further bounce).
+  // The cache must outlive the Integrator.
+  const BounceCache* bounceCache = nullptr;
 };
 
 // An estimate split into the light that arrives without bouncing and the rest.

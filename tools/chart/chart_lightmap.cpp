@@ -261,8 +261,9 @@ Result<ChartTable> lightmapSamplesChart(const ChartOptions& o) {
 
 namespace kiln::chart {
 
-// Chart 7: bake time vs error with a fixed count per texel and with adaptive sampling
-// (errorTarget), both denoised, against the same kind of reference as chart 1.
+// Chart 7: bake time vs error with a fixed count per texel, with adaptive sampling
+// (errorTarget), with a bounce cache (final gather) and with the cache's Neyman allocation,
+// all denoised, against the same kind of reference as chart 1.
 Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
   const std::string path = o.scenesDir + "/cornell_box.gltf";
   Result<Scene> scene = loadScene(path);
@@ -275,7 +276,8 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
   const int cap = 4096;
   const int referenceSamples = o.quick ? 1024 : 16384;
   const int repeats = o.quick ? 1 : 3;
-  Progress progress("chart adaptive", 1 + (counts.size() + targets.size()) * size_t(repeats),
+  Progress progress("chart adaptive",
+                    1 + (3 * counts.size() + targets.size()) * size_t(repeats),
                     "bakes", o.progress);
   auto timedBake = [&](const LightmapBakeSettings& settings, double* seconds) {
     return timedLightmapBake(*scene, path, settings, o.cancel, progress, seconds);
@@ -285,14 +287,19 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
       timedBake(referenceSettings(s, referenceSamples, o.seed), &refSeconds);
   if (!reference) return Error{reference.error()};
 
+  // kind: "fixed" (full paths), "adaptive" (errorTarget), "gather" (a bounce cache of
+  // kGatherCache paths, fixed counts), "gather adaptive" (the same, Neyman allocation).
+  constexpr int kGatherCache = 8;
   struct Variant {
-    bool adaptive;
+    const char* kind;
     float target;
     int samples;
   };
   std::vector<Variant> variants;
-  for (int c : counts) variants.push_back({false, 0.0f, c});
-  for (float e : targets) variants.push_back({true, e, cap});
+  for (int c : counts) variants.push_back({"fixed", 0.0f, c});
+  for (float e : targets) variants.push_back({"adaptive", e, cap});
+  for (int c : counts) variants.push_back({"gather", 0.0f, c});
+  for (int c : counts) variants.push_back({"gather adaptive", 0.0f, c});
   struct Cell {
     std::vector<double> wall;
     ErrorSums error;
@@ -305,6 +312,9 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
       LightmapBakeSettings settings = s;
       settings.samplesPerTexel = variants[v].samples;
       settings.errorTarget = variants[v].target;
+      const std::string kind = variants[v].kind;
+      settings.bounceCacheSamples = kind.rfind("gather", 0) == 0 ? kGatherCache : 0;
+      settings.adaptiveSamples = kind == "gather adaptive";
       double wall = 0.0;
       Result<LightmapBakeResult> bake = timedBake(settings, &wall);
       if (!bake) return Error{bake.error()};
@@ -319,19 +329,23 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
 
   ChartTable t;
   t.name = "lightmap_adaptive";
-  t.title = "Lightmap: bake time vs error, fixed samples vs adaptive (cornell_box, denoised)";
+  t.title = "Lightmap: bake time vs error, fixed, adaptive and gather (cornell_box, denoised)";
   t.columns = {"variant", "error_target", "mean_samples", "relative_rms_error", "mean_ratio",
                "bake_seconds", "rays", "repeats", "reference_samples"};
   for (size_t v = 0; v < variants.size(); ++v) {
     const Cell& c = cells[v];
-    t.addRow({variants[v].adaptive ? "adaptive" : "fixed", num(variants[v].target),
+    t.addRow({variants[v].kind, num(variants[v].target),
               num(c.meanSamples), num(c.error.relative()), num(c.error.ratio()),
               num(median(c.wall)), std::to_string(c.rays), std::to_string(repeats),
               std::to_string(referenceSamples)});
   }
   t.notes = commonNotes(o, o.threads);
   t.notes.push_back("chart 7: lightmap bake time vs error, fixed samples per texel vs adaptive "
-                    "sampling (errorTarget, cap " + std::to_string(cap) + "), denoiser on");
+                    "sampling (errorTarget, cap " + std::to_string(cap) + "), denoiser on; "
+                    "gather = a bounce cache of " + std::to_string(kGatherCache) +
+                    " paths per texel read at the paths' first hit (--bounce-cache), fixed "
+                    "counts; gather adaptive = the same total of paths by Neyman allocation "
+                    "from the cache's spread (--adaptive)");
   t.notes.push_back("scene: " + path + "; settings as chart 1 (resolution " + num(s.resolution) +
                     ", 3 bounces, supersampling 1, stitching off)");
   t.notes.push_back("baseline: a " + std::to_string(referenceSamples) +
@@ -346,7 +360,12 @@ Result<ChartTable> lightmapAdaptiveChart(const ChartOptions& o) {
       "plot @CSV@ using 'bake_seconds':(strcol('variant') eq 'fixed' ? "
       "column('relative_rms_error') : NaN) with linespoints lw 2 pt 7 title 'fixed samples', "
       "\\\n  '' using 'bake_seconds':(strcol('variant') eq 'adaptive' ? "
-      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 5 title 'adaptive'\n";
+      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 5 title 'adaptive', "
+      "\\\n  '' using 'bake_seconds':(strcol('variant') eq 'gather' ? "
+      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 9 title 'gather (bounce "
+      "cache)', \\\n  '' using 'bake_seconds':(strcol('variant') eq 'gather adaptive' ? "
+      "column('relative_rms_error') : NaN) with linespoints lw 2 pt 11 title 'gather, "
+      "adaptive'\n";
   return t;
 }
 

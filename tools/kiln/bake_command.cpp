@@ -39,6 +39,8 @@ struct BakeOptions {
   std::string preset;
   std::optional<int> samples;
   std::optional<float> errorTarget;
+  std::optional<int> bounceCache;
+  bool adaptive = false;
   bool coverageMap = false;
   bool footprintGrid = false;
   std::optional<float> resolution;
@@ -198,6 +200,8 @@ int runBake(const BakeOptions& o) {
     settings.errorTarget = 0.0f;
   }
   if (o.errorTarget) settings.errorTarget = *o.errorTarget;
+  if (o.bounceCache) settings.bounceCacheSamples = *o.bounceCache;
+  if (o.adaptive) settings.adaptiveSamples = true;
   if (o.coverageMap) settings.coverageMap = true;
   if (o.footprintGrid) settings.footprintGrid = true;
   if (o.resolution) settings.resolution = *o.resolution;
@@ -229,6 +233,13 @@ int runBake(const BakeOptions& o) {
     if (int code = lockAtlas(o, scene, settings)) return code;
 
   // Settings that cannot work together (each alone is range-checked by CLI11 or the loader).
+  if (settings.adaptiveSamples &&
+      (settings.bounceCacheSamples == 0 || settings.errorTarget > 0.0f)) {
+    printError(std::string("--adaptive allocates paths by the bounce cache's first pass: it "
+                           "needs --bounce-cache N (N >= 1)") +
+               (settings.errorTarget > 0.0f ? " and no --error-target" : ""));
+    return kExitBadUsage;
+  }
   if (settings.maxSize < 1 + 2 * settings.padding) {
     printError("--max-size " + std::to_string(settings.maxSize) + " cannot hold one texel with " +
                "--padding " + std::to_string(settings.padding) +
@@ -307,6 +318,13 @@ void registerBakeCommand(CLI::App& app) {
                 "Adaptive sampling: each texel takes paths until the standard error of its "
                 "mean is at most this share of its value (plus a floor); 0 = off")
       ->check(CLI::Range(0.0f, 1.0f));
+  b->add_option("--bounce-cache", o->bounceCache,
+                "Final gather: a first pass of this many paths per texel, whose light the "
+                "bake's paths read at their first hit instead of tracing on; 0 = off")
+      ->check(CLI::Range(0, 1 << 24));
+  b->add_flag("--adaptive", o->adaptive,
+              "With --bounce-cache: the same paths in total, given to texels in proportion to "
+              "the spread the first pass measured (--samples on average, up to 8x)");
   b->add_flag("--footprint-grid", o->footprintGrid,
               "Texels next to geometry average the visible part of their footprint (4 x 4 "
               "points; experimental: mixes both sides of thin walls)");
