@@ -27,6 +27,7 @@ int gSize = 1;
 bool gStarted = false;
 uint64_t gStage = 0;
 uint64_t gBytesSent = 0, gBytesReceived = 0;
+bool gFailureAgreed = false;
 
 const char* envValue(const char* name) {
   const char* v = std::getenv(name);
@@ -47,6 +48,9 @@ MPI_Comm gProgressComm = MPI_COMM_NULL;  // progress reports (point to point, ta
 MPI_Comm gDataComm = MPI_COMM_NULL;      // exchangeBytes
 constexpr int kProgressTag = 1;
 constexpr int kDataTag = 2;
+constexpr int kCancelTag = 3;  // rank 0 -> the others: a rank was interrupted, stop too
+bool gCancelSent = false;
+int gCancelOrigin = -1;  // rank 0: the rank whose interruption it passed on
 // Largest single message: MPI counts are ints.
 constexpr size_t kChunkBytes = size_t(1) << 30;
 
@@ -58,7 +62,27 @@ struct RemoteProgress {
 };
 std::vector<RemoteProgress> gRemote;
 
-// Caller holds gMpiMutex. Receives every pending progress report.
+// Caller holds gMpiMutex. Rank 0: tells every other rank to stop (once) and stops itself.
+void broadcastCancelLocked() {
+  cancelFlag().store(true);
+  if (gCancelSent) return;
+  gCancelSent = true;
+  const uint64_t msg = 1;
+  for (int r = 1; r < gSize; ++r) MPI_Send(&msg, 1, MPI_UINT64_T, r, kCancelTag, gProgressComm);
+}
+
+// Caller holds gMpiMutex. Rank 0's cancel request, if one came: sets the cancel flag.
+void receiveCancelLocked() {
+  int flag = 0;
+  MPI_Iprobe(0, kCancelTag, gProgressComm, &flag, MPI_STATUS_IGNORE);
+  if (!flag) return;
+  uint64_t msg = 0;
+  MPI_Recv(&msg, 1, MPI_UINT64_T, 0, kCancelTag, gProgressComm, MPI_STATUS_IGNORE);
+  cancelFlag().store(true);
+}
+
+// Caller holds gMpiMutex. Receives every pending progress report; a rank that reports it was
+// interrupted (Ctrl-C reaches every rank, but SIGTERM may reach one) stops the whole job.
 void drainProgressLocked() {
   for (;;) {
     int flag = 0;
@@ -70,7 +94,11 @@ void drainProgressLocked() {
              MPI_STATUS_IGNORE);
     RemoteProgress& r = gRemote[size_t(status.MPI_SOURCE)];
     if (msg[0] < r.stage) continue;  // a late report of an earlier stage
-    r = {msg[0], msg[1], msg[2] != 0};
+    r = {msg[0], msg[1], (msg[2] & 1u) != 0};
+    if (msg[2] & 2u) {
+      if (gCancelOrigin < 0) gCancelOrigin = status.MPI_SOURCE;
+      broadcastCancelLocked();
+    }
   }
 }
 
@@ -155,6 +183,7 @@ void stopDistributed() {
 }
 
 int distributedRank() { return gRank; }
+bool distributedFailureAgreed() { return gFailureAgreed; }
 int distributedSize() { return gSize; }
 
 void distributedAbort(const std::string& message, int code) {
@@ -224,13 +253,14 @@ Status exchangeBytes(const WorkSplit& split, std::byte* data, size_t itemBytes, 
   const uint64_t stage = progress ? progress->distributedStage() : 0;
   if (stage != 0) {
     if (gRank != 0) {
-      sendDistributedProgress(stage, progress->done(), true);
+      sendDistributedProgress(stage, progress->done(), true, localCancelled);
     } else {
       // Keep the line moving while the other ranks finish their shares.
       for (;;) {
         bool all = true;
         {
           std::lock_guard<std::mutex> lock(gMpiMutex);
+          if (localCancelled) broadcastCancelLocked();
           drainProgressLocked();
           for (int r = 1; r < gSize; ++r)
             all = all && gRemote[size_t(r)].stage == stage && gRemote[size_t(r)].final;
@@ -249,11 +279,16 @@ Status exchangeBytes(const WorkSplit& split, std::byte* data, size_t itemBytes, 
   MPI_Allgather(local.data(), 3, MPI_UINT64_T, all.data(), 3, MPI_UINT64_T, gDataComm);
   for (int r = 0; r < gSize; ++r) {
     if (all[3 * size_t(r)]) continue;
+    // The rank interrupted first, rather than those rank 0 then stopped.
+    if (gCancelOrigin > 0 && !all[3 * size_t(gCancelOrigin)]) r = gCancelOrigin;
     bool anyCancelled = false;
     for (int q = 0; q < gSize; ++q) anyCancelled = anyCancelled || all[3 * size_t(q) + 1];
     if (anyCancelled) cancelFlag().store(true);
-    return Error{"rank " + std::to_string(r) + " of " + std::to_string(gSize) +
-                 (all[3 * size_t(r) + 1] ? " was interrupted" : " failed")};
+    const std::string what = "rank " + std::to_string(r) + " of " + std::to_string(gSize) +
+                             (all[3 * size_t(r) + 1] ? " was interrupted" : " failed");
+    if (gRank == 0) std::fprintf(stderr, "kiln: %s\n", what.c_str());
+    gFailureAgreed = true;
+    return Error{what};
   }
   if (gRank == 0) {
     std::vector<std::byte> buffer;
@@ -304,17 +339,19 @@ uint64_t distributedBytesReceived() { return gBytesReceived; }
 
 uint64_t newDistributedStage() { return distributedActive() ? ++gStage : 0; }
 
-void sendDistributedProgress(uint64_t stage, uint64_t done, bool final) {
+void sendDistributedProgress(uint64_t stage, uint64_t done, bool final, bool cancelled) {
 #ifdef KILN_WITH_MPI
   if (!gStarted || gRank == 0 || stage == 0) return;
   std::lock_guard<std::mutex> lock(gMpiMutex);
-  const uint64_t msg[3] = {stage, done, final ? 1u : 0u};
+  const uint64_t msg[3] = {stage, done, (final ? 1u : 0u) | (cancelled ? 2u : 0u)};
   // 24 bytes: sent eagerly, returns without rank 0 posting a receive.
   MPI_Send(msg, 3, MPI_UINT64_T, 0, kProgressTag, gProgressComm);
+  receiveCancelLocked();
 #else
   (void)stage;
   (void)done;
   (void)final;
+  (void)cancelled;
 #endif
 }
 

@@ -44,6 +44,10 @@ int distributedSize();  // 1 when not distributed
 inline bool distributedRoot() { return distributedRank() == 0; }
 inline bool distributedActive() { return distributedSize() > 1; }
 
+// Whether an exchangeBytes failed on every rank alike (one rank interrupted or failed): each
+// rank then ends on its own path with the same outcome, no MPI_Abort needed.
+bool distributedFailureAgreed();
+
 // Prints "kiln: error: rank R of N: <message>" (nothing when `message` is empty) and ends the
 // whole job (MPI_Abort, exit code `code`); without MPI prints "kiln: error: <message>" and
 // exits with `code`.
@@ -95,10 +99,12 @@ uint64_t distributedBytesSent();
 uint64_t distributedBytesReceived();
 
 // Progress reports (used by Progress; see progress.h): a new id for a progress line split
-// across ranks (the same sequence on every rank), a rank's report of its done count, and on
-// rank 0 the sum of the other ranks' latest reports for `stage`.
+// across ranks (the same sequence on every rank), a rank's report of its done count (`final`
+// when its share is over, `cancelled` when it was interrupted: rank 0 then sets the cancel
+// flag of every rank, which each sees at its next report), and on rank 0 the sum of the
+// other ranks' latest reports for `stage`.
 uint64_t newDistributedStage();
-void sendDistributedProgress(uint64_t stage, uint64_t done, bool final);
+void sendDistributedProgress(uint64_t stage, uint64_t done, bool final, bool cancelled = false);
 uint64_t remoteDistributedProgress(uint64_t stage);
 
 }  // namespace kiln

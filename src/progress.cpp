@@ -46,6 +46,8 @@ static_assert(std::atomic<bool>::is_always_lock_free, "signal handler needs a lo
 
 extern "C" void onInterrupt(int) {
   gCancel.store(true);
+  // The other ranks of a distributed bake stay quiet (mpirun signals every rank).
+  if (distributedRank() != 0) return;
   // Async-signal-safe report; SA_RESETHAND already restored the default action, so a
   // second Ctrl-C terminates the process.
   static const char kMessage[] = "\nkiln: interrupted, stopping (press Ctrl-C again to kill)\n";
@@ -76,7 +78,8 @@ void Progress::advance(size_t n) {
     if (!lock.owns_lock() || std::chrono::duration<double>(now - lastPrint_).count() < 0.5)
       return;
     lastPrint_ = now;
-    sendDistributedProgress(stage_, done_.load(std::memory_order_relaxed), false);
+    sendDistributedProgress(stage_, done_.load(std::memory_order_relaxed), false,
+                            cancelFlag().load());
     return;
   }
   poll();

@@ -158,7 +158,7 @@ TEST_F(MpiTest, ProbeFileByteIdenticalToOneProcess) {
 // same positions file as one process, but for the report's wall time.
 TEST_F(MpiTest, PlacementPositionsIdenticalToOneProcess) {
   const std::string base = std::string(test::kilnExe()) + " probes place " + scene +
-                           " --budget 24 --rays 64 --check-points 256 -q --out ";
+                           " --budget 48 --rays 32 --check-points 128 --depth 1 -q --out ";
   auto read = [](const std::string& path) {
     Json j = Json::parse(test::readTextFile(path));
     j["report"].erase("seconds");
@@ -196,9 +196,42 @@ pid_t findRank(int rank, const std::string& marker) {
   return -1;
 }
 
-// A rank killed (SIGKILL) during the light stage: mpirun fails, says which process died, and
-// the output directory keeps the earlier bake's files, byte for byte, with no temporary file.
-TEST_F(MpiTest, KilledRankFailsTheJobAndLeavesEarlierOutputs) {
+// Bakes into `outDir` (holding an earlier bake) with `ranks` ranks and sends `signal` to
+// rank `rank` once the light stage has started. Returns mpirun's wait status; *log gets its
+// output.
+int bakeAndSignalRank(const std::string& scene, const std::string& dir, const std::string& outDir,
+                      int ranks, int rank, int signal, std::string* log) {
+  // Long enough (minutes) that the signal lands inside the light stage; 2^16 paths per texel
+  // keep a chunk of texels (cancellation is polled between chunks) around a second.
+  const std::string command = mpirun(ranks) + test::kilnExe() + " bake " + scene +
+                              " --samples 65536 --resolution 6 --threads 1 --out " + outDir +
+                              " > " + dir + "/log.txt 2>&1";
+  const pid_t child = fork();
+  if (child < 0) return -1;
+  if (child == 0) {
+    execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait for the light stage's progress (rank 0 prints it), then signal the rank.
+  bool sent = false;
+  const auto start = std::chrono::steady_clock::now();
+  while (!sent && std::chrono::steady_clock::now() - start < std::chrono::seconds(120)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (test::readTextFile(dir + "/log.txt").find("bake: ") == std::string::npos) continue;
+    const pid_t pid = findRank(rank, outDir);
+    sent = pid > 0 && ::kill(pid, signal) == 0;
+  }
+  if (!sent) ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  *log = test::readTextFile(dir + "/log.txt");
+  return sent ? status : -1;
+}
+
+// A rank killed (SIGKILL) or stopped (SIGTERM, as Ctrl-C on one node) during the light stage:
+// the job fails (SIGTERM: exit 130 and rank 0 names the rank), and the output directory keeps
+// the earlier bake's files byte for byte, with no temporary file.
+TEST_F(MpiTest, KilledOrInterruptedRankFailsTheJobAndLeavesEarlierOutputs) {
   const std::string outDir = dir + "/lm";
   std::string out;
   ASSERT_EQ(run(std::string(test::kilnExe()) + " bake " + scene +
@@ -207,42 +240,28 @@ TEST_F(MpiTest, KilledRankFailsTheJobAndLeavesEarlierOutputs) {
             0)
       << out;
   const auto earlier = filesUnder(outDir);
-  // Long enough (minutes) that the kill lands inside the light stage.
-  const std::string command = mpirun(2) + test::kilnExe() + " bake " + scene +
-                              " --samples 1048576 --resolution 6 --threads 1 --out " + outDir +
-                              " > " + dir + "/log.txt 2>&1";
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  // Wait for the light stage's progress (rank 0 prints it), then kill rank 1.
-  bool killed = false;
-  const auto start = std::chrono::steady_clock::now();
-  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(120)) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    if (test::readTextFile(dir + "/log.txt").find("bake: ") == std::string::npos) continue;
-    const pid_t rank1 = findRank(1, outDir);
-    if (rank1 > 0 && ::kill(rank1, SIGKILL) == 0) {
-      killed = true;
-      break;
-    }
-  }
-  int status = 0;
-  if (!killed) ::kill(child, SIGKILL);
-  ASSERT_EQ(::waitpid(child, &status, 0), child);
-  const std::string log = test::readTextFile(dir + "/log.txt");
-  ASSERT_TRUE(killed) << log;
+  auto expectEarlierOutputs = [&](const std::string& log) {
+    const auto after = filesUnder(outDir);
+    EXPECT_EQ(after.size(), earlier.size()) << log;
+    for (const auto& [name, bytes] : earlier)
+      EXPECT_TRUE(after.count(name) && after.at(name) == bytes) << name << " changed\n" << log;
+  };
+  std::string log;
+  int status = bakeAndSignalRank(scene, dir, outDir, 2, 1, SIGKILL, &log);
+  ASSERT_NE(status, -1) << log;
   ASSERT_TRUE(WIFEXITED(status)) << log;
   EXPECT_NE(WEXITSTATUS(status), 0) << log;
+  EXPECT_NE(log.find("rank 1"), std::string::npos) << log;
   EXPECT_NE(log.find("signal 9"), std::string::npos) << log;
-  const auto after = filesUnder(outDir);
-  ASSERT_EQ(after.size(), earlier.size()) << log;
-  for (const auto& [name, bytes] : earlier) {
-    ASSERT_TRUE(after.count(name)) << name;
-    EXPECT_TRUE(after.at(name) == bytes) << name << " changed";
-  }
+  expectEarlierOutputs(log);
+
+  status = bakeAndSignalRank(scene, dir, outDir, 3, 2, SIGTERM, &log);
+  ASSERT_NE(status, -1) << log;
+  ASSERT_TRUE(WIFEXITED(status)) << log;
+  EXPECT_EQ(WEXITSTATUS(status), 130) << log;
+  EXPECT_NE(log.find("kiln: rank 2 of 3 was interrupted"), std::string::npos) << log;
+  EXPECT_NE(log.find("left untouched"), std::string::npos) << log;
+  expectEarlierOutputs(log);
 }
 
 }  // namespace

@@ -43,7 +43,7 @@ int startDistributedBake(bool mpi) {
 }
 
 void finishDistributedJob(int exitCode) {
-  if (exitCode == kExitOk || !distributedActive()) {
+  if (exitCode == kExitOk || !distributedActive() || distributedFailureAgreed()) {
     stopDistributed();
     return;
   }

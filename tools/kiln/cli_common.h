@@ -33,8 +33,9 @@ void addMpiFlag(CLI::App* command, bool* mpi);
 // Starts MPI for a distributed bake (src/distributed.h: under mpirun / srun, or --mpi).
 // Prints the error and returns kExitBadUsage when that cannot be done, else kExitOk.
 int startDistributedBake(bool mpi);
-// The end of a `kiln` run: exit code 0 finalizes MPI; any other code on any rank ends every
-// rank of the job with that code (MPI_Abort), since the others may be waiting for it.
+// The end of a `kiln` run: exit code 0 (or a failure every rank learnt of in the same
+// exchange) finalizes MPI; any other code on any rank ends every rank of the job with that
+// code (MPI_Abort), since the others may be waiting for it.
 void finishDistributedJob(int exitCode);
 
 // Wraps a subcommand's body for CLI::App::callback: a non-zero exit code from `body` ends
