@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <mutex>
 #include <thread>
 
@@ -120,14 +121,6 @@ void receiveChunked(std::byte* data, size_t bytes, int from) {
 #endif
 
 }  // namespace
-
-bool distributedAvailable() {
-#ifdef KILN_WITH_MPI
-  return true;
-#else
-  return false;
-#endif
-}
 
 Status startDistributed(bool force) {
   if (gStarted) return Status::success();

@@ -13,9 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <functional>
-#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -26,9 +24,6 @@
 namespace kiln {
 
 class Progress;
-
-// Whether this build has MPI (KILN_WITH_MPI).
-bool distributedAvailable();
 
 // Starts MPI when `force` (--mpi) or when the environment shows a launcher started this
 // process (Open MPI's mpirun: OMPI_COMM_WORLD_SIZE; PMIx / PMI launchers such as srun:
