@@ -16,6 +16,9 @@
 #include "src/progress.h"
 
 #ifdef KILN_WITH_MPI
+// The C API only: not the deprecated C++ bindings mpi.h would otherwise pull in.
+#define OMPI_SKIP_MPICXX 1
+#define MPICH_SKIP_MPICXX 1
 #include <mpi.h>
 #endif
 
