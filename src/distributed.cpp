@@ -42,7 +42,11 @@ const char* envValue(const char* name) {
 int launcherSize() {
   for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE"})
     if (const char* v = envValue(name)) return std::max(1, std::atoi(v));
-  if (envValue("PMIX_RANK") || envValue("PMI_RANK")) return 1;  // size unknown here
+  if (envValue("PMIX_RANK") || envValue("PMI_RANK")) {
+    // PMIx gives no size in the environment; under Slurm's srun the task count says it.
+    const char* tasks = envValue("SLURM_NTASKS");
+    return tasks ? std::max(1, std::atoi(tasks)) : 1;
+  }
   return 0;
 }
 
