@@ -40,6 +40,7 @@
 #include "lightmap/postprocess.h"
 #include "lightmap/seams.h"
 #include "lightmap/texel_raster.h"
+#include "src/distributed.h"
 #include "src/integrator.h"
 #include "src/parallel.h"
 #include "src/tracer.h"
@@ -687,6 +688,23 @@ double meanTexelLuminance(const std::vector<RasterPage>& pages,
   return count ? sum / double(count) : 0.0;
 }
 
+// Texels per tile of a distributed bake (consecutive covered texels: row strips).
+constexpr size_t kTexelTile = 64;
+
+// Stage 5's texels split across the ranks of a distributed bake, in tiles balanced by
+// estimated cost: the paths (each sample also traces the AO ray and the shadowmask rays when
+// those are baked) plus the enclosure rays of each sample point. The scene's triangle count
+// scales every ray alike, so it does not move the balance.
+WorkSplit splitTexels(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
+                      const LightSettings& s) {
+  const double perSample = 1.0 + (s.ambientOcclusion ? 1.0 : 0.0) + (s.shadowmask ? 1.0 : 0.0);
+  return splitWork(texels.size(), kTexelTile, [&](size_t i) {
+    RasterPage& page = pages[texels[i].page];
+    const uint32_t points = texelPoints(page, page.texels[texels[i].index], s.supersampling).second;
+    return double(s.samples) * perSample + double(points) * double(kEnclosureRays);
+  });
+}
+
 // Stage 5: light at every covered texel.
 bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                 const Integrator& integrator, const LightSettings& s, bool showProgress,
@@ -696,8 +714,12 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
   options.progress = &progress;
   options.grain = 4;
   out.assign(texels.size(), TexelLight{});
-  const bool done = parallelFor(
-      texels.size(),
+  // Distributed bakes (src/distributed.h): this rank lights its tiles of texels, rank 0
+  // gathers every texel's TexelLight; without MPI every texel is local.
+  const WorkSplit split = splitTexels(pages, texels, s);
+  progress.splitAcrossRanks();
+  const bool done = parallelForLocal(
+      split,
       [&](size_t begin, size_t end) {
         const uint64_t before = Integrator::threadRayCount();
         uint64_t extraRays = 0;
@@ -718,8 +740,12 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
         rays += Integrator::threadRayCount() - before + extraRays;
       },
       options);
-  if (done) progress.finish();
-  return done;
+  if (!exchangeItems(split, out, 1, false, done, !done, &progress)) return false;
+  // Rank 0: the other ranks' rays (each texel's count came with it).
+  for (size_t i = 0; i < out.size() && split.distributed() && distributedRoot(); ++i)
+    if (split.owner[i] != 0) rays += out[i].rays;
+  progress.finish();
+  return true;
 }
 
 // Progress of stage 6's steps over all pages, in texels of the maps each step processes
@@ -1233,6 +1259,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
     return Error{"cancelled"};
   result.stats.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // A distributed bake's other ranks are done: rank 0 post-processes and writes.
+  if (!distributedRoot()) return result;
 
   // Stage 6: post, page by page (each post function is parallel inside).
   result.pages.resize(pages.size());

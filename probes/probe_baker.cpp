@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "src/distributed.h"
 #include "src/parallel.h"
 #include "src/sampling.h"
 #include "src/sh_projection.h"
@@ -248,50 +249,70 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   const Integrator integrator(scene, tracer, probeIntegratorSettings(scene, settings));
   rep.integrator = integrator.settings();
   const size_t count = positions.size();
-  std::vector<ProbeSample> samples(count);
+  // Per probe: what bakeProbe returns but the visibility map (kept in `moments`), and the
+  // rays it traced (+ the first segments traced for validity).
+  struct ProbeOut {
+    ShL2Rgb sh;
+    float validity = 1.0f;
+    uint64_t rays = 0;
+  };
+  std::vector<ProbeOut> outs(count);
   const std::vector<float> maxDistance = probeVisibilityMaxDistances(scene, positions, settings);
+  const size_t perProbe = settings.visibilityResolution > 0
+                              ? kVisibilityValuesPerTexel *
+                                    size_t(settings.visibilityResolution) *
+                                    size_t(settings.visibilityResolution)
+                              : 0;
+  std::vector<uint16_t> moments(count * perProbe);
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
-  std::atomic<uint64_t> rays{0};
   ParallelOptions options;
   options.threads = settings.threads;
   options.grain = 1;  // a probe is thousands of paths: balance load probe by probe
   options.progress = progress;
   options.cancel = cancel;
-  const bool finished = parallelFor(
-      count,
+  // Distributed bakes (src/distributed.h): probes dealt one by one across the ranks (every
+  // probe costs the same rays), every rank gets every probe back (placement bakes again).
+  const WorkSplit split = splitWork(count, 1);
+  if (progress) progress->splitAcrossRanks();
+  const bool finished = parallelForLocal(
+      split,
       [&](size_t begin, size_t end) {
-        const uint64_t before = Integrator::threadRayCount();
         for (size_t i = begin; i < end; ++i) {
+          const uint64_t before = Integrator::threadRayCount();
           const uint64_t key = hashValues(settings.seed, i);
           VisibilityMapSpec vis;
           if (!maxDistance.empty()) vis = {settings.visibilityResolution, maxDistance[i]};
-          samples[i] = bakeProbe(integrator, positions[i], key, settings.rays,
-                                 settings.lightSamples, cancel, vis);
+          const ProbeSample sample = bakeProbe(integrator, positions[i], key, settings.rays,
+                                               settings.lightSamples, cancel, vis);
+          outs[i].sh = sample.sh;
+          outs[i].validity = sample.validity;
+          std::copy(sample.visibility.begin(), sample.visibility.end(),
+                    moments.begin() + ptrdiff_t(i * perProbe));
           if (anyChannel) {
             occlusion[i] =
                 bakeProbeOcclusion(integrator, plan, positions[i], key, settings.occlusionSamples);
           }
+          outs[i].rays = Integrator::threadRayCount() - before + settings.rays;
         }
-        // + the first segments traced for validity.
-        rays += Integrator::threadRayCount() - before + (end - begin) * settings.rays;
       },
       options);
-  if (!finished || (cancel && cancel->load())) return Error{"cancelled"};
+  const bool ok = finished && !(cancel && cancel->load());
+  if (!exchangeItems(split, outs, 1, true, ok, !ok, progress) ||
+      !exchangeItems(split, moments, perProbe, true, true, false, nullptr) ||
+      !exchangeItems(split, occlusion, 1, true, true, false, nullptr))
+    return Error{"cancelled"};
   if (progress) progress->finish();
-  rep.rays = rays.load();
+  for (const ProbeOut& o : outs) rep.rays += o.rays;
 
   for (size_t i = 0; i < count; ++i) {
-    set.sh[i] = samples[i].sh;
-    set.validity[i] = samples[i].validity;
+    set.sh[i] = outs[i].sh;
+    set.validity[i] = outs[i].validity;
   }
   set.occlusion = std::move(occlusion);
   if (settings.visibilityResolution > 0) {
     set.visibility.resolution = settings.visibilityResolution;
     set.visibility.maxDistance = maxDistance;
-    set.visibility.moments.reserve(count * set.visibility.valuesPerProbe());
-    for (const ProbeSample& ps : samples)
-      set.visibility.moments.insert(set.visibility.moments.end(), ps.visibility.begin(),
-                                    ps.visibility.end());
+    set.visibility.moments = std::move(moments);
   }
 
   // Validity: probes inside geometry get their valid neighbours' mean (from the raw bake).

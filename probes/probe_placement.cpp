@@ -18,6 +18,7 @@
 #include "probes/placement_evaluation.h"
 #include "probes/tetrahedralize.h"
 #include "src/integrator.h"
+#include "src/distributed.h"
 #include "src/parallel.h"
 #include "src/sampling.h"
 
@@ -415,8 +416,12 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
   options.grain = 4;
   options.progress = progress;
   options.cancel = cancel;
-  const bool done = parallelFor(
-      points.size(),
+  // Distributed bakes (src/distributed.h): points dealt one by one across the ranks; every
+  // rank gets every point's SH (placement goes on from them on every rank).
+  const WorkSplit split = splitWork(points.size(), 1);
+  if (progress) progress->splitAcrossRanks();
+  const bool done = parallelForLocal(
+      split,
       [&](size_t begin, size_t end) {
         for (size_t i = begin; i < end; ++i) {
           VisibilityMapSpec spec;
@@ -431,7 +436,11 @@ std::vector<ShL2Rgb> bakePointSh(const Scene& scene, const Tracer& tracer,
         }
       },
       options);
-  if (!done || (cancel && cancel->load())) return {};
+  const bool ok = done && !(cancel && cancel->load());
+  if (!exchangeItems(split, out, 1, true, ok, !ok, progress) ||
+      (withVisibility && !exchangeItems(split, visibility->moments, visibility->valuesPerProbe(),
+                                        true, true, false, nullptr)))
+    return {};
   return out;
 }
 

@@ -5,6 +5,8 @@
 // stay readable.
 #include "src/progress.h"
 
+#include "src/distributed.h"
+
 #include <unistd.h>
 
 #include <csignal>
@@ -44,6 +46,8 @@ static_assert(std::atomic<bool>::is_always_lock_free, "signal handler needs a lo
 
 extern "C" void onInterrupt(int) {
   gCancel.store(true);
+  // The other ranks of a distributed bake stay quiet (mpirun signals every rank).
+  if (distributedRank() != 0) return;
   // Async-signal-safe report; SA_RESETHAND already restored the default action, so a
   // second Ctrl-C terminates the process.
   static const char kMessage[] = "\nkiln: interrupted, stopping (press Ctrl-C again to kill)\n";
@@ -61,28 +65,44 @@ Progress::Progress(std::string label, size_t total, std::string unit, bool enabl
 Progress::~Progress() {
   // Leave the terminal on a fresh line if an in-place line was shown but finish() was not
   // called (an error or cancellation).
-  if (enabled_ && !finished_ && stderrIsTty() && lastPrint_ != start_) std::fputc('\n', stderr);
+  if (enabled_ && distributedRoot() && !finished_ && stderrIsTty() && lastPrint_ != start_)
+    std::fputc('\n', stderr);
 }
 
 void Progress::advance(size_t n) {
   done_.fetch_add(n, std::memory_order_relaxed);
-  if (!enabled_) return;
+  if (stage_ != 0 && !distributedRoot()) {
+    // Another rank's share: report it to rank 0 every half second.
+    const auto now = std::chrono::steady_clock::now();
+    std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+    if (!lock.owns_lock() || std::chrono::duration<double>(now - lastPrint_).count() < 0.5)
+      return;
+    lastPrint_ = now;
+    sendDistributedProgress(stage_, done_.load(std::memory_order_relaxed), false,
+                            cancelFlag().load());
+    return;
+  }
+  poll();
+}
+
+void Progress::poll() {
+  if (!enabled_ || !distributedRoot()) return;
   auto now = std::chrono::steady_clock::now();
   double interval = stderrIsTty() ? 0.5 : 3.0;
-  {
-    std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
-    if (!lock.owns_lock() || finished_) return;  // someone else is printing
-    if (std::chrono::duration<double>(now - lastPrint_).count() < interval) return;
-    lastPrint_ = now;
-    print(false);
-  }
+  std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+  if (!lock.owns_lock() || finished_) return;  // someone else is printing
+  if (std::chrono::duration<double>(now - lastPrint_).count() < interval) return;
+  lastPrint_ = now;
+  print(false);
 }
+
+void Progress::splitAcrossRanks() { stage_ = newDistributedStage(); }
 
 void Progress::finish() {
   std::lock_guard<std::mutex> lock(mutex_);
   if (finished_) return;
   finished_ = true;
-  if (enabled_) print(true);
+  if (enabled_ && distributedRoot()) print(true);
 }
 
 Progress::Busy::Busy(Progress& progress) : progress_(progress) {
@@ -110,7 +130,9 @@ double Progress::elapsedSeconds() const {
 
 // Caller holds mutex_.
 void Progress::print(bool final) {
-  size_t done = std::min(done_.load(std::memory_order_relaxed), total_);
+  // Split across ranks: the other ranks' latest reports too (rank 0 only prints).
+  const size_t remote = stage_ != 0 ? size_t(remoteDistributedProgress(stage_)) : 0;
+  size_t done = std::min(done_.load(std::memory_order_relaxed) + remote, total_);
   double elapsed = elapsedSeconds();
   double fraction = total_ > 0 ? double(done) / double(total_) : 1.0;
   double rate = elapsed > 0 ? double(done) / elapsed : 0.0;

@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cstddef>
 #include <mutex>
 #include <string>
@@ -21,6 +22,16 @@ class Progress {
   // Prints the final line (100%, total time) once.
   void finish();
   size_t done() const { return done_.load(std::memory_order_relaxed); }
+
+  // Distributed bakes (src/distributed.h): the work this line counts is split across ranks.
+  // `total` stays the whole job's; each rank advances by its own items. The other ranks
+  // report their counts to rank 0 at most every half second and print nothing; rank 0's line
+  // shows the sum (percent, rate and ETA of the whole job). Call on every rank, in the same
+  // order (it takes the next id of distributed.h's sequence). No-op when not distributed.
+  void splitAcrossRanks();
+  uint64_t distributedStage() const { return stage_; }
+  // Prints the line if it is due (rank 0, while it waits for the other ranks' shares).
+  void poll();
 
   // For an operation done in pieces interleaved with others (the post-processing steps, page
   // by page): once a Busy has been made, the rate, ETA and total time count only the time
@@ -42,6 +53,7 @@ class Progress {
   void print(bool final);
   std::string label_, unit_;
   size_t total_;
+  uint64_t stage_ = 0;  // splitAcrossRanks' id; 0 = this process's work only
   bool enabled_;
   bool finished_ = false;
   std::atomic<size_t> done_{0};

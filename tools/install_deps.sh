@@ -23,7 +23,7 @@ apt-get install -y -qq --no-install-recommends \
   build-essential cmake ninja-build python3 \
   libembree-dev libtet1.5-dev libcgal-dev libglm-dev libopenexr-dev libtinygltf-dev \
   libstb-dev libeigen3-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev libbenchmark-dev \
-  libmeshoptimizer-dev libdraco-dev \
+  libmeshoptimizer-dev libdraco-dev libopenmpi-dev openmpi-bin \
   gnuplot-nox \
   > /dev/null
 [ "$test_tools" = 1 ] || exit 0

@@ -19,6 +19,7 @@
 #include "lightmap/lightmap_writer.h"
 #include "lightmap/manifest.h"
 #include "lightmap/uv_unwrap.h"
+#include "src/distributed.h"
 #include "src/progress.h"
 #include "src/text_file.h"
 #include "tools/kiln/cli_common.h"
@@ -62,6 +63,7 @@ struct BakeOptions {
   bool atlasUv = false;
   bool glb = false;
   bool quiet = false;
+  bool mpi = false;
   SkyOptions sky;
 };
 
@@ -161,8 +163,13 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
   return kExitOk;
 }
 
-int runBake(const BakeOptions& o) {
+int runBake(const BakeOptions& options) {
   const auto start = std::chrono::steady_clock::now();
+  // A distributed bake (docs/distributed.md): every rank bakes its share; rank 0 alone
+  // prints, post-processes and writes.
+  if (int code = startDistributedBake(options.mpi)) return code;
+  BakeOptions o = options;
+  o.quiet = o.quiet || !distributedRoot();
   std::optional<vec3> shadowColor;
   if (o.shadowColor) {
     shadowColor = parseNonNegativeRgb(*o.shadowColor);
@@ -174,7 +181,8 @@ int runBake(const BakeOptions& o) {
     }
   }
   // Before any work: a bad --out or sky fails now, not after the bake.
-  if (int code = checkOutputDirectory("--out", o.out)) return code;
+  if (distributedRoot())
+    if (int code = checkOutputDirectory("--out", o.out)) return code;
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
@@ -263,6 +271,7 @@ int runBake(const BakeOptions& o) {
     printError(scene.path + ": " + baked.error());
     return kExitBadInput;
   }
+  if (!distributedRoot()) return kExitOk;  // rank 0 has every texel and writes
   const LightmapBakeResult& result = *baked;
   std::vector<std::string> writeWarnings;
   if (Status s = writeLightmapOutputs(o.scene, result, settings, output, &writeWarnings); !s) {
@@ -290,7 +299,11 @@ int runBake(const BakeOptions& o) {
          << "/" << st.maxSamples << " paths per texel (min/mean/max), "
          << humanCount(double(st.rays)) << " rays in " << st.seconds << " s ("
          << humanCount(st.seconds > 0 ? double(st.rays) / st.seconds : 0.0)
-         << " rays/s); total " << seconds << " s\n";
+         << " rays/s); total " << seconds << " s";
+    if (distributedActive())
+      line << "; " << distributedSize() << " ranks, "
+           << humanCount(double(distributedBytesReceived())) << "B gathered";
+    line << "\n";
     std::cerr << line.str();
   }
   return kExitOk;
@@ -377,6 +390,7 @@ void registerBakeCommand(CLI::App& app) {
               "Also bake the dominant light direction (lightmap-<i>_direction.exr)");
   addSkyOptions(b, o->sky);
   b->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
+  addMpiFlag(b, &o->mpi);
   b->callback(commandCallback([o]() { return runBake(*o); }));
 }
 

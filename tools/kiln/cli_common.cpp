@@ -14,13 +14,42 @@
 #include <memory>
 
 #include "kiln/probe_visibility.h"
+#include "src/distributed.h"
 #include "src/progress.h"
 
 namespace kiln::cli {
 
-void printError(const std::string& message) { std::cerr << "kiln: error: " << message << "\n"; }
+void printError(const std::string& message) {
+  if (distributedRoot()) std::cerr << "kiln: error: " << message << "\n";
+}
 
-void printWarning(const std::string& message) { std::cerr << "kiln: warning: " << message << "\n"; }
+void printWarning(const std::string& message) {
+  if (distributedRoot()) std::cerr << "kiln: warning: " << message << "\n";
+}
+
+void addMpiFlag(CLI::App* command, bool* mpi) {
+  command->add_flag("--mpi", *mpi,
+                    "Distributed bake over MPI (automatic under mpirun or srun): ranks split "
+                    "the work, rank 0 writes the outputs, byte-identical to one process "
+                    "(docs/distributed.md)");
+}
+
+int startDistributedBake(bool mpi) {
+  if (Status s = startDistributed(mpi); !s) {
+    printError(s.error());
+    return kExitBadUsage;
+  }
+  return kExitOk;
+}
+
+void finishDistributedJob(int exitCode) {
+  if (exitCode == kExitOk || !distributedActive() || distributedFailureAgreed()) {
+    stopDistributed();
+    return;
+  }
+  std::cerr.flush();
+  distributedAbort("", exitCode);  // the message was printed already
+}
 
 std::function<void()> commandCallback(std::function<int()> body) {
   return [body = std::move(body)]() {

@@ -23,8 +23,20 @@ inline constexpr int kExitBadInput = 1;  // a file could not be loaded, read or 
 inline constexpr int kExitBadUsage = 2;  // wrong options or arguments
 inline constexpr int kExitInterrupted = 130;  // Ctrl-C / SIGTERM: 128 + SIGINT, as the shell
 
+// Printed by rank 0 only in a distributed bake (the other ranks run the same code and would
+// repeat it; a rank's own failure ends the job through finishDistributedJob's MPI_Abort).
 void printError(const std::string& message);
 void printWarning(const std::string& message);
+
+// --mpi on the commands that bake across ranks (kiln bake, probes bake, probes place).
+void addMpiFlag(CLI::App* command, bool* mpi);
+// Starts MPI for a distributed bake (src/distributed.h: under mpirun / srun, or --mpi).
+// Prints the error and returns kExitBadUsage when that cannot be done, else kExitOk.
+int startDistributedBake(bool mpi);
+// The end of a `kiln` run: exit code 0 (or a failure every rank learnt of in the same
+// exchange) finalizes MPI; any other code on any rank ends every rank of the job with that
+// code (MPI_Abort), since the others may be waiting for it.
+void finishDistributedJob(int exitCode);
 
 // Wraps a subcommand's body for CLI::App::callback: a non-zero exit code from `body` ends
 // parsing with that code (as a CLI::RuntimeError, which CLI11 does not print).

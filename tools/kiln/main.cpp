@@ -5,6 +5,7 @@
 #include <iostream>
 #include <string>
 
+#include "src/distributed.h"
 #include "tools/kiln/cli_common.h"
 
 #ifndef KILN_VERSION
@@ -23,19 +24,25 @@ int main(int argc, char** argv) {
   registerRenderCommand(app);
   registerChartCommand(app);
 
+  int code = kExitOk;
   try {
     app.parse(argc, argv);
   } catch (const CLI::Success& e) {  // --help, --help-all, --version
-    return app.exit(e);
+    code = app.exit(e);
   } catch (const CLI::RuntimeError& e) {
-    return e.get_exit_code();  // a subcommand's own failure, already reported
+    code = e.get_exit_code();  // a subcommand's own failure, already reported
   } catch (const CLI::ParseError& e) {
     printError(std::string(e.what()) + " (run 'kiln --help' for usage)");
-    return kExitBadUsage;
+    code = kExitBadUsage;
   } catch (const std::exception& e) {
-    // A bug or an exhausted resource: report it rather than abort.
+    // A bug or an exhausted resource: report it rather than abort. In a distributed bake
+    // this rank alone may have failed: say which, and end the job.
+    if (kiln::distributedActive())
+      kiln::distributedAbort(std::string("unexpected failure: ") + e.what(), kExitBadInput);
     printError(std::string("unexpected failure: ") + e.what());
-    return kExitBadInput;
+    code = kExitBadInput;
   }
-  return kExitOk;
+  // A distributed bake (src/distributed.h) ends on every rank here.
+  finishDistributedJob(code);
+  return code;
 }

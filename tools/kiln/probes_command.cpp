@@ -17,6 +17,7 @@
 #include "kiln/probe_runtime.h"
 #include "kiln/probe_set.h"
 #include "probes/probe_baker.h"
+#include "src/distributed.h"
 #include "src/progress.h"
 #include "src/sh_projection.h"
 #include "src/text_file.h"
@@ -67,12 +68,18 @@ struct BakeOptions {
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = none
   float visibilityMaxDistance = 0.0f;                       // 0 = per probe (auto)
   bool quiet = false;
+  bool mpi = false;
   SkyOptions sky;
 };
 
-int runBake(const BakeOptions& o) {
+int runBake(const BakeOptions& options) {
+  // A distributed bake (docs/distributed.md): probes split across ranks, rank 0 writes.
+  if (int code = startDistributedBake(options.mpi)) return code;
+  BakeOptions o = options;
+  o.quiet = o.quiet || !distributedRoot();
   // Before any work: a bad --out or sky fails now, not after the bake.
-  if (int code = checkOutputFile("--out", o.out)) return code;
+  if (distributedRoot())
+    if (int code = checkOutputFile("--out", o.out)) return code;
   std::optional<Sky> sky;
   if (int code = resolveSky(o.sky, &sky)) return code;
   Scene scene;
@@ -139,6 +146,7 @@ int runBake(const BakeOptions& o) {
     printError(scene.path + ": " + set.error());
     return kExitBadInput;
   }
+  if (!distributedRoot()) return kExitOk;  // rank 0 writes
   for (const std::string& w : report.warnings) printWarning(w);
   if (Status s = writeProbeFile(*set, o.out); !s) {
     printError(s.error());
@@ -476,6 +484,7 @@ void registerProbesCommand(CLI::App& app) {
       ->capture_default_str();
   addSkyOptions(b, bake->sky);
   b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
+  addMpiFlag(b, &bake->mpi);
   b->callback(commandCallback([bake]() { return runBake(*bake); }));
 
   auto query = std::make_shared<QueryOptions>();

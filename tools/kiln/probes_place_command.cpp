@@ -21,6 +21,7 @@
 #include "probes/placement_evaluation.h"
 #include "probes/probe_baker.h"
 #include "probes/probe_placement.h"
+#include "src/distributed.h"
 #include "src/progress.h"
 #include "src/tracer.h"
 #include "tools/kiln/cli_common.h"
@@ -73,6 +74,7 @@ struct CommonOptions {
   uint64_t seed = 0;
   int threads = 0;
   bool quiet = false;
+  bool mpi = false;
   SkyOptions sky;
 };
 
@@ -184,14 +186,20 @@ struct PlaceOptions {
   bool noPrune = false;
 };
 
-int runPlace(const PlaceOptions& o) {
+int runPlace(const PlaceOptions& options) {
+  // A distributed placement (docs/distributed.md): the cheap bakes split across ranks, every
+  // rank places from all of them; rank 0 writes.
+  if (int code = startDistributedBake(options.common.mpi)) return code;
+  PlaceOptions o = options;
+  o.common.quiet = o.common.quiet || !distributedRoot();
   ProbePlacementSettings settings;
   if (int code = makeSettings(o.common, &settings)) return code;
   settings.budget = uint32_t(o.budget);
   settings.targetError = o.targetError;
   settings.prune = !o.noPrune;
   // Before any work: a bad --out fails now, not after the placement.
-  if (int code = checkOutputFile("--out", o.out)) return code;
+  if (distributedRoot())
+    if (int code = checkOutputFile("--out", o.out)) return code;
   LoadedScene ls;
   if (int code = loadTraced(o.common, &ls)) return code;
   addSceneProbes(o.common, ls.scene, &settings);
@@ -201,6 +209,7 @@ int runPlace(const PlaceOptions& o) {
     printError(o.common.scene + ": " + placed.error());
     return kExitBadInput;
   }
+  if (!distributedRoot()) return kExitOk;  // rank 0 writes
   // "positions" leaves the scene's own probes out: `kiln probes bake` adds them itself
   // (unless --no-scene-probes); "fixedPositions" lists them.
   Json positions = Json::array(), fixedPositions = Json::array(), probes = Json::array();
@@ -581,6 +590,7 @@ void registerProbesPlaceCommand(CLI::App& probes) {
   CLI::App* p = probes.add_subcommand(
       "place", "Place probes automatically (error-driven) and write positions JSON for bake");
   addCommonOptions(p, &place->common);
+  addMpiFlag(p, &place->common.mpi);
   p->add_option("--out,-o", place->out,
                 "Output JSON {\"positions\": [...], \"probes\": [notes], \"report\": {...}}")
       ->required();
