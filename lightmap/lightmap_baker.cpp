@@ -692,30 +692,34 @@ double meanTexelLuminance(const std::vector<RasterPage>& pages,
 constexpr size_t kTexelTile = 64;
 
 // Stage 5's texels split across the ranks of a distributed bake, in tiles balanced by
-// estimated cost: the paths (each sample also traces the AO ray and the shadowmask rays when
-// those are baked) plus the enclosure rays of each sample point. The scene's triangle count
-// scales every ray alike, so it does not move the balance.
+// estimated cost: the paths (per texel under adaptive sampling; each sample also traces the
+// AO ray and the shadowmask rays when those are baked) plus the enclosure rays of each sample
+// point. The scene's triangle count scales every ray alike, so it does not move the balance.
 WorkSplit splitTexels(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                       const LightSettings& s) {
   const double perSample = 1.0 + (s.ambientOcclusion ? 1.0 : 0.0) + (s.shadowmask ? 1.0 : 0.0);
   return splitWork(texels.size(), kTexelTile, [&](size_t i) {
     RasterPage& page = pages[texels[i].page];
     const uint32_t points = texelPoints(page, page.texels[texels[i].index], s.supersampling).second;
-    return double(s.samples) * perSample + double(points) * double(kEnclosureRays);
+    // Adaptive sampling's own count per texel, as the light stage uses it.
+    const uint32_t samples = s.texelSamples ? std::max((*s.texelSamples)[i], points) : s.samples;
+    return double(samples) * perSample + double(points) * double(kEnclosureRays);
   });
 }
 
-// Stage 5: light at every covered texel.
+// Stage 5: light at every covered texel. A distributed bake gathers `out` on rank 0 only,
+// or on every rank with `toAll` (a pass whose light every rank reads afterwards: the bounce
+// cache).
 bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                 const Integrator& integrator, const LightSettings& s, bool showProgress,
                 ParallelOptions options, std::vector<TexelLight>& out,
-                std::atomic<uint64_t>& rays, const char* phase = "bake") {
+                std::atomic<uint64_t>& rays, const char* phase = "bake", bool toAll = false) {
   Progress progress(phase, texels.size(), "texels", showProgress);
   options.progress = &progress;
   options.grain = 4;
   out.assign(texels.size(), TexelLight{});
-  // Distributed bakes (src/distributed.h): this rank lights its tiles of texels, rank 0
-  // gathers every texel's TexelLight; without MPI every texel is local.
+  // Distributed bakes (src/distributed.h): this rank lights its tiles of texels, rank 0 (or
+  // every rank) gathers every texel's TexelLight; without MPI every texel is local.
   const WorkSplit split = splitTexels(pages, texels, s);
   progress.splitAcrossRanks();
   const bool done = parallelForLocal(
@@ -740,7 +744,7 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
         rays += Integrator::threadRayCount() - before + extraRays;
       },
       options);
-  if (!exchangeItems(split, out, 1, false, done, !done, &progress)) return false;
+  if (!exchangeItems(split, out, 1, toAll, done, !done, &progress)) return false;
   // Rank 0: the other ranks' rays (each texel's count came with it).
   for (size_t i = 0; i < out.size() && split.distributed() && distributedRoot(); ++i)
     if (split.owner[i] != 0) rays += out[i].rays;
@@ -1021,7 +1025,10 @@ std::unique_ptr<LightmapBounceCache> bounceCachePass(
   ls.enclosedTexels = settings.enclosedTexels;
   ls.layout = &layout;
   std::vector<TexelLight> light;
-  if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays, "bounce cache"))
+  // Every rank of a distributed bake reads the cache (its texels' paths end on it), and
+  // adaptive sampling splits the main pass by this pass's spread: the light goes to all.
+  if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays,
+                  "bounce cache", true))
     return nullptr;
   pathSpread.assign(texels.size(), -1.0f);
   for (size_t i = 0; i < texels.size(); ++i)

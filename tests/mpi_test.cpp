@@ -81,12 +81,16 @@ class MpiTest : public ::testing::Test {
   std::string dir, scene;
 };
 
-// Lightmaps in shadowmask mode with directional and AO pages, fixed and adaptive sampling:
-// every output file of 2 ranks x 1 thread and 3 ranks x 2 threads equals one process's.
+// Lightmaps in shadowmask mode with directional and AO pages, fixed and adaptive sampling,
+// and the final gather from a bounce cache (a pass every rank must read in full) with its
+// adaptive allocation: every output file of 2 ranks x 1 thread and 3 ranks x 2 threads
+// equals one process's.
 TEST_F(MpiTest, LightmapsByteIdenticalToOneProcess) {
   const std::vector<std::string> configs = {
       "--samples 32 --lighting-mode shadowmask --directional --ao",
-      "--samples 128 --error-target 0.05 --lighting-mode shadowmask --directional"};
+      "--samples 128 --error-target 0.05 --lighting-mode shadowmask --directional",
+      "--samples 32 --bounce-cache 8 --adaptive --footprint-grid --coverage-map "
+      "--lighting-mode shadowmask --directional"};
   for (size_t c = 0; c < configs.size(); ++c) {
     const std::string base = std::string(test::kilnExe()) + " bake " + scene + " " + configs[c] +
                              " --resolution 6 -q --out ";
