@@ -303,6 +303,68 @@ TEST(ProbeLookup, BatchMatchesSingleQueriesAndUpdatesHints) {
   }
 }
 
+// The batch forms interleave several walks (probe_runtime.cpp); each point must still get
+// exactly the single lookup's result. Points inside and outside the hull, probe positions and
+// edge midpoints (undecided fast steps), without hints, with good hints and with stale ones
+// (any cell, outer cells included), on a grid (cospherical: exact steps) and random probes.
+TEST(ProbeLookup, InterleavedBatchGivesTheSingleLookupsResults) {
+  std::vector<glm::vec3> grid;
+  for (int z = 0; z < 12; ++z)
+    for (int y = 0; y < 12; ++y)
+      for (int x = 0; x < 12; ++x) grid.push_back(glm::vec3(x, y, z) * (2.0f / 11.0f) - 1.0f);
+  for (const ProbeSet& s : {build(cubeProbes(4000, 61), DelaunayBackend::Cgal),
+                            build(grid, DelaunayBackend::Cgal)}) {
+    std::mt19937 rng(62);
+    std::uniform_real_distribution<float> u(-1.5f, 1.5f);
+    std::uniform_int_distribution<int32_t> anyCell(0, s.cellCount() - 1);
+    std::uniform_int_distribution<int32_t> anyProbe(0, s.probeCount() - 1);
+    std::vector<glm::vec3> points(20000);
+    std::vector<int32_t> hints(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+      points[i] = glm::vec3(u(rng), u(rng), u(rng));
+      if (i % 7 == 3) points[i] = s.positions[size_t(anyProbe(rng))];
+      if (i % 7 == 5) {
+        const glm::ivec4 t = s.cells[size_t(anyCell(rng) % s.innerCellCount)];
+        points[i] = 0.5f * (s.positions[size_t(t[0])] + s.positions[size_t(t[1])]);
+      }
+      hints[i] = i % 3 == 0 ? -1 : i % 3 == 1 ? anyCell(rng) : locateProbe(s, points[i]).cell;
+    }
+    for (bool withHints : {false, true}) {
+      std::vector<int32_t> h = hints;
+      std::vector<ProbeLocation> batch(points.size());
+      locateProbes(s, points, withHints ? std::span<int32_t>(h) : std::span<int32_t>{}, batch);
+      std::vector<ShL2Rgb> sh(points.size());
+      std::vector<glm::vec4> occlusion(points.size());
+      std::vector<int32_t> h2 = hints;
+      sampleProbes(s, points, withHints ? std::span<int32_t>(h2) : std::span<int32_t>{}, sh,
+                   occlusion);
+      int outside = 0, walked = 0;
+      for (size_t i = 0; i < points.size(); ++i) {
+        const ProbeLocation one = locateProbe(s, points[i], withHints ? hints[i] : -1);
+        const ProbeLocation& b = batch[i];
+        ASSERT_EQ(b.cell, one.cell) << i;
+        ASSERT_EQ(b.probes, one.probes) << i;
+        ASSERT_EQ(b.weights, one.weights) << i;
+        ASSERT_EQ(b.barycentric, one.barycentric) << i;
+        ASSERT_EQ(b.steps, one.steps) << i;
+        ASSERT_EQ(b.bruteForce, one.bruteForce) << i;
+        if (withHints) {
+          ASSERT_EQ(h[i], one.cell);
+          ASSERT_EQ(h2[i], one.cell);
+        }
+        const ShL2Rgb ref = interpolateProbes(s, one);
+        for (int k = 0; k < kShL2Count; ++k) ASSERT_EQ(sh[i].c[k], ref.c[k]) << i;
+        ASSERT_EQ(occlusion[i], interpolateOcclusion(s, one)) << i;
+        outside += one.cell >= s.innerCellCount;
+        walked += one.steps > 2;
+      }
+      // The cases the interleaving hands over to the single walk occur, and so do long walks.
+      EXPECT_GT(outside, int(points.size()) / 10);
+      EXPECT_GT(walked, int(points.size()) / 10);
+    }
+  }
+}
+
 TEST(ProbeLookup, ManyThreadsGetTheSameAnswers) {
   const ProbeSet s = build(ballProbes(500, 19), DelaunayBackend::Cgal);
   std::mt19937 rng(20);
