@@ -352,15 +352,14 @@ inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
   return k;
 }
 
-// finish()'s work for a fast step that ended inside (every l_k finite and positive).
+// finish()'s work for a fast step that ended inside (every l_k finite and positive). The
+// coordinates need no normalising: l_0 = ((1 - l_1) - l_2) - l_3 makes their sum 1 within
+// three roundings (each l_k < 1 inside), as close as dividing by the sum would.
 inline void setFast(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const float l[4]) {
   const glm::ivec4 t = s.cells[size_t(cell)];
-  const double b0 = l[0], b1 = l[1], b2 = l[2], b3 = l[3];
-  const double inverse = 1.0 / (((b0 + b1) + b2) + b3);
   loc.cell = cell;
   loc.probes = {t[0], t[1], t[2], t[3]};
-  loc.barycentric = {float(b0 * inverse), float(b1 * inverse), float(b2 * inverse),
-                     float(b3 * inverse)};
+  loc.barycentric = {l[0], l[1], l[2], l[3]};
 }
 
 // A hint to the cache (no effect on results).
@@ -764,6 +763,23 @@ void prepareProbeLookup(ProbeSet& s) {
 
 ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
                           const ProbeBlendSettings& blend) noexcept {
+  // The common case first: a hint whose cell still holds p (an object that stayed in its
+  // cell since the last lookup) takes one fast step and nothing else.
+  if (uint32_t(hint) < uint32_t(s.innerCellCount) && s.dimension == 3 &&
+      s.walk.size() == size_t(s.innerCellCount)) {
+    float l[4];
+    if (fastStep(s.walk[size_t(hint)], p, l) == -1) {
+      ProbeLocation loc;
+      setFast(s, loc, hint, l);
+      loc.steps = 1;
+      if (blend.visibility && !s.visibility.empty()) {
+        weightByVisibility(s, p, loc, blend);
+      } else {
+        loc.weights = loc.barycentric;
+      }
+      return loc;
+    }
+  }
   return locate(s, p, hint, blend, true);
 }
 
