@@ -16,6 +16,7 @@
 namespace kiln {
 namespace {
 
+using detail::prefetch;
 using glm::dvec2;
 using glm::dvec3;
 
@@ -101,13 +102,6 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
     }
   }
   return rep;
-}
-
-// A hint to the cache (no effect on results).
-inline void prefetch([[maybe_unused]] const void* address) {
-#if defined(__GNUC__) || defined(__clang__)
-  __builtin_prefetch(address, 0, 3);
-#endif
 }
 
 // Sorted key of a face / edge / vertex, for matching cells across it: key[0] < key[1] <

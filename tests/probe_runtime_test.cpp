@@ -14,6 +14,7 @@
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
 #include "kiln/probe_set.h"
+#include "kiln_runtime.h"
 #include "probes/tetrahedralize.h"
 
 namespace kiln {
@@ -658,4 +659,77 @@ TEST(ProbeFile, RandomCorruptionNeverCrashes) {
 }
 
 }  // namespace
+// The C batch (kiln_probes_sample_batch_blend) takes its cells from the interleaved C++
+// batch a chunk at a time and weights each point with its own normal: against single C
+// lookups with the same normals, on a file with visibility maps (so the normals matter), over
+// several chunks, with and without hints.
+TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
+  ProbeSet s = build(cubeProbes(1500, 71), DelaunayBackend::Cgal);
+  s.visibility.resolution = kMinVisibilityResolution;
+  s.visibility.maxDistance.assign(size_t(s.probeCount()), 1.0f);
+  s.visibility.moments.resize(size_t(s.probeCount()) * s.visibility.valuesPerProbe());
+  std::mt19937 rng(72);
+  std::uniform_int_distribution<int> depth(2000, 40000);
+  for (size_t t = 0; t < s.visibility.moments.size(); t += kVisibilityValuesPerTexel) {
+    const int mu = depth(rng);
+    s.visibility.moments[t] = uint16_t(mu);
+    s.visibility.moments[t + 1] = uint16_t(mu / 20);
+    s.visibility.moments[t + 2] = uint16_t(std::min(65535, mu + mu / 4));
+  }
+  const std::string path = tempPath("c_batch.kprobe");
+  ASSERT_TRUE(writeProbeFile(s, path).ok());
+  kiln_probes* probes = nullptr;
+  ASSERT_EQ(kiln_probes_load(path.c_str(), &probes), KILN_OK) << kiln_last_error();
+  std::filesystem::remove(path);
+  std::uniform_real_distribution<float> u(-1.3f, 1.3f);
+  std::normal_distribution<float> g;
+  const size_t n = 300;  // several chunks and a partial one
+  std::vector<float> positions(3 * n), normals(3 * n);
+  std::vector<int32_t> hints(n);
+  for (size_t i = 0; i < n; ++i) {
+    const glm::vec3 d = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    for (int a = 0; a < 3; ++a) {
+      positions[3 * i + size_t(a)] = u(rng);
+      normals[3 * i + size_t(a)] = d[a];
+    }
+    hints[i] = i % 2 ? int32_t(i * 37 % size_t(s.cellCount())) : -1;
+  }
+  kiln_probe_blend blend;
+  ASSERT_EQ(kiln_probe_blend_defaults(&blend), KILN_OK);
+  int hidden = 0;
+  for (bool withHints : {false, true}) {
+    std::vector<int32_t> h = hints;
+    std::vector<kiln_probe_location> batch(n);
+    std::vector<float> sh(27 * n);
+    ASSERT_EQ(kiln_probes_sample_batch_blend(probes, n, positions.data(), normals.data(), &blend,
+                                             withHints ? h.data() : nullptr, batch.data(),
+                                             sh.data()),
+              KILN_OK)
+        << kiln_last_error();
+    for (size_t i = 0; i < n; ++i) {
+      kiln_probe_blend one = blend;
+      std::memcpy(one.normal, &normals[3 * i], sizeof(one.normal));
+      kiln_probe_location loc;
+      ASSERT_EQ(kiln_probes_locate_blend(probes, &positions[3 * i], withHints ? hints[i] : -1,
+                                         &one, &loc),
+                KILN_OK);
+      float ref[27];
+      ASSERT_EQ(kiln_probes_sample_sh(probes, &loc, ref), KILN_OK);
+      ASSERT_EQ(batch[i].cell, loc.cell) << i;
+      if (withHints) {
+        ASSERT_EQ(h[i], loc.cell) << i;
+      }
+      for (int k = 0; k < 4; ++k) {
+        ASSERT_EQ(batch[i].probes[k], loc.probes[k]) << i;
+        ASSERT_EQ(batch[i].weights[k], loc.weights[k]) << i;
+        ASSERT_EQ(batch[i].barycentric[k], loc.barycentric[k]) << i;
+        hidden += loc.weights[k] != loc.barycentric[k];
+      }
+      for (int k = 0; k < 27; ++k) ASSERT_EQ(sh[27 * i + size_t(k)], ref[k]) << i;
+    }
+  }
+  EXPECT_GT(hidden, int(n) / 4) << "the visibility weighting changes weights";
+  kiln_probes_release(probes);
+}
+
 }  // namespace kiln
