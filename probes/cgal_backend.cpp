@@ -14,6 +14,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include "probes/delaunay_backends.h"
+#include "probes/runtime/src/prefetch.h"
 
 namespace kiln::detail {
 namespace {
@@ -26,6 +27,7 @@ using Delaunay3 = CGAL::Delaunay_triangulation_3<Kernel, Tds3>;
 using Vb2 = CGAL::Triangulation_vertex_base_with_info_2<int32_t, Kernel>;
 using Tds2 = CGAL::Triangulation_data_structure_2<Vb2>;
 using Delaunay2 = CGAL::Delaunay_triangulation_2<Kernel, Tds2>;
+using runtime_detail::prefetch;
 
 }  // namespace
 

@@ -35,13 +35,6 @@ Result<Tetrahedralization> tetgenDelaunay3(std::span<const glm::dvec3> points);
 // default backend: about twice as fast as TetGen on random probes).
 Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points);
 
-// A hint to the cache (no effect on results), for the passes that read scattered cells.
-inline void prefetch([[maybe_unused]] const void* address) {
-#if defined(__GNUC__) || defined(__clang__)
-  __builtin_prefetch(address, 0, 3);
-#endif
-}
-
 // CGAL Delaunay_triangulation_2 (the fallback for coplanar probes), counter-clockwise faces.
 Result<Triangles> cgalDelaunay2(std::span<const glm::dvec2> points);
 

@@ -12,11 +12,12 @@
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
 #include "probes/delaunay_backends.h"
+#include "probes/runtime/src/prefetch.h"
 
 namespace kiln {
 namespace {
 
-using detail::prefetch;
+using runtime_detail::prefetch;
 using glm::dvec2;
 using glm::dvec3;
 

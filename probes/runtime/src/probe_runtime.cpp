@@ -14,11 +14,13 @@
 #include <limits>
 
 #include "kiln/predicates.h"
+#include "prefetch.h"
 
 namespace kiln {
 namespace {
 
 using glm::dvec3;
+using runtime_detail::prefetch;
 
 // Outer-cell barycentrics this far below zero still count as inside (then clamped); keeps
 // neighbouring outer cells from both rejecting a point on their shared swept edge.
@@ -360,13 +362,6 @@ inline void setFast(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const f
   loc.cell = cell;
   loc.probes = {t[0], t[1], t[2], t[3]};
   loc.barycentric = {l[0], l[1], l[2], l[3]};
-}
-
-// A hint to the cache (no effect on results).
-inline void prefetch([[maybe_unused]] const void* address) {
-#if defined(__GNUC__) || defined(__clang__)
-  __builtin_prefetch(address, 0, 3);
-#endif
 }
 
 // The walk: with `walk` (the set's records) each step tries fastStep first; without, every

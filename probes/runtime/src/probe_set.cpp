@@ -12,6 +12,7 @@
 
 #include "binary_file.h"
 #include "kiln/probe_runtime.h"
+#include "prefetch.h"
 
 namespace kiln {
 
@@ -21,6 +22,8 @@ static_assert(sizeof(ShL2Rgb) == 27 * sizeof(float), "ShL2Rgb must be 27 packed 
 static_assert(sizeof(glm::vec3) == 12 && sizeof(glm::ivec4) == 16 && sizeof(glm::vec4) == 16);
 
 namespace {
+
+using runtime_detail::prefetch;
 
 // Limits that keep every size computation far from overflow.
 constexpr uint32_t kMaxProbes = 1u << 26;
@@ -198,6 +201,15 @@ bool cellSlotsValid(const ProbeSet& s) {
   bool ok = true;
   auto cells = [&](size_t first, size_t last, int used) {
     for (size_t c = first; c < last; ++c) {
+      // The linked cells' rows lie anywhere in the array: fetch those of the cell kAhead
+      // places on (its own row is read in order), so that the misses overlap.
+      constexpr size_t kAhead = 8;
+      if (c + kAhead < last) {
+        const glm::ivec4 ahead = s.neighbours[c + kAhead];
+        for (int k = 0; k < 4; ++k) {
+          if (uint32_t(ahead[k]) < nc) prefetch(&s.neighbours[size_t(ahead[k])]);
+        }
+      }
       const glm::ivec4 v = s.cells[c], n = s.neighbours[c];
       const int32_t ci = int32_t(c);
       for (int k = 0; k < 4; ++k) {
