@@ -390,9 +390,6 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
         }
       }
       next = walk ? walk[cell].next[exit] : s.neighbours[cell][exit];
-      // The next step reads the next record and, if it ends there, the cell's probes: fetch
-      // both at once (two independent misses overlap instead of following each other).
-      if (walk && next >= 0) prefetch(&s.cells[size_t(next)]);
     } else {
       const OuterEval e = evalOuter(s, cell, p);
       if (e.exit < 0) {
