@@ -12,10 +12,12 @@
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
 #include "probes/delaunay_backends.h"
+#include "probes/runtime/src/prefetch.h"
 
 namespace kiln {
 namespace {
 
+using runtime_detail::prefetch;
 using glm::dvec2;
 using glm::dvec3;
 
@@ -205,17 +207,18 @@ struct CurveKeys {
   }
 };
 
-std::vector<int32_t> curveOrder(const std::vector<uint32_t>& keys,
-                                const std::vector<glm::ivec4>& tets) {
-  const size_t n = tets.size();
-  // key << 32 | index: sorting the words sorts by key, ties by the backend's index.
-  std::vector<uint64_t> words(n), swap(n);
-  for (size_t c = 0; c < n; ++c) words[c] = (uint64_t(keys[c]) << 32) | c;
-  // LSD radix sort on the 3 x kCurveBits key bits (stable).
-  constexpr int kDigit = kCurveBits;
-  for (int pass = 0; pass < 3; ++pass) {
+// `words` holds key << 32 | index into `tets` per cell; sorted in place.
+std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets& tets) {
+  const size_t n = words.size();
+  std::vector<uint64_t> swap(n);
+  // LSD radix sort on the 3 x kCurveBits key bits in two passes (stable): sorting the words
+  // sorts by key, ties by the backend's index.
+  constexpr int kDigit = 15;
+  static_assert(2 * kDigit >= 3 * kCurveBits);
+  std::vector<uint32_t> count((1u << kDigit) + 1);
+  for (int pass = 0; pass < 2; ++pass) {
     const int shift = 32 + pass * kDigit;
-    std::vector<uint32_t> count((1u << kDigit) + 1, 0);
+    std::fill(count.begin(), count.end(), 0u);
     for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
     for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
     for (uint64_t w : words) swap[count[(w >> shift) & ((1u << kDigit) - 1)]++] = w;
@@ -228,10 +231,8 @@ std::vector<int32_t> curveOrder(const std::vector<uint32_t>& keys,
     size_t j = i + 1;
     while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
     if (j - i > 1) {
-      std::sort(order.begin() + long(i), order.begin() + long(j), [&](int32_t a, int32_t b) {
-        return std::lexicographical_compare(&tets[a][0], &tets[a][0] + 4, &tets[b][0],
-                                            &tets[b][0] + 4);
-      });
+      std::sort(order.begin() + long(i), order.begin() + long(j),
+                [&](int32_t a, int32_t b) { return tets[size_t(a)] < tets[size_t(b)]; });
     }
     i = j;
   }
@@ -248,95 +249,127 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
                                                : detail::cgalDelaunay3(pts);
   if (!raw) return Error{raw.error()};
   ProbeSet s = emptySet(ctx, 3);
-  // Each tetrahedron's probes sorted, then the last two swapped if that makes the orientation
-  // positive; its backend neighbours follow their vertices to the new slots.
-  std::vector<glm::ivec4> tets, backendNeighbours;
-  std::vector<uint32_t> keys;
-  tets.reserve(raw->tets.size());
-  backendNeighbours.reserve(raw->tets.size());
-  keys.reserve(raw->tets.size());
+  // Pass 1, in the backend's order and in place: each tetrahedron's probes sorted, then the
+  // last two swapped if that makes the orientation positive, its backend neighbours following
+  // their vertices to the new slots; its curve key; flat ones marked (probe -1) and left out.
+  detail::Tets& tets = raw->tets;
+  detail::Tets& backendNeighbours = raw->neighbours;
+  std::vector<uint64_t> words;
+  words.reserve(tets.size());
   const CurveKeys curve(lo, hi);
   int flat = 0;
-  for (size_t r = 0; r < raw->tets.size(); ++r) {
-    const auto& t = raw->tets[r];
-    glm::ivec4 v(reps[t[0]], reps[t[1]], reps[t[2]], reps[t[3]]);
-    glm::ivec4 slot(0, 1, 2, 3);
+  size_t hullFaces = 0;
+  for (size_t r = 0; r < tets.size(); ++r) {
+    std::array<int32_t, 4>& t = tets[r];
+    int32_t v[4] = {reps[size_t(t[0])], reps[size_t(t[1])], reps[size_t(t[2])],
+                    reps[size_t(t[3])]};
+    int slot[4] = {0, 1, 2, 3};
     for (int i = 1; i < 4; ++i) {  // insertion sort, carrying the slots along
       for (int j = i; j > 0 && v[j - 1] > v[j]; --j) {
         std::swap(v[j - 1], v[j]);
         std::swap(slot[j - 1], slot[j]);
       }
     }
-    const glm::vec3 a = P[v[0]], b = P[v[1]], c = P[v[2]], d = P[v[3]];
+    const glm::vec3 a = P[size_t(v[0])], b = P[size_t(v[1])], c = P[size_t(v[2])],
+                    d = P[size_t(v[3])];
     const double o = orient3d(a, b, c, d);
     if (o == 0.0) {
       ++flat;
+      t[0] = -1;
       continue;
     }
     if (o < 0.0) {  // an odd permutation makes it positive
       std::swap(v[2], v[3]);
       std::swap(slot[2], slot[3]);
     }
-    tets.push_back(v);
-    keys.push_back(curve.of(a, b, c, d));
-    const auto& n = raw->neighbours[r];
-    backendNeighbours.push_back(glm::ivec4(n[slot[0]], n[slot[1]], n[slot[2]], n[slot[3]]));
+    t = {v[0], v[1], v[2], v[3]};
+    std::array<int32_t, 4>& n = backendNeighbours[r];
+    n = {n[size_t(slot[0])], n[size_t(slot[1])], n[size_t(slot[2])], n[size_t(slot[3])]};
+    hullFaces += size_t(n[0] < 0) + size_t(n[1] < 0) + size_t(n[2] < 0) + size_t(n[3] < 0);
+    words.push_back((uint64_t(curve.of(a, b, c, d)) << 32) | r);
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
-  if (tets.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  const std::vector<int32_t> order = curveOrder(keys, tets);
-  const int32_t inner = int32_t(tets.size());
-  std::vector<int32_t> newIndex(tets.size());
-  for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[i])] = i;
-  {
-    std::vector<glm::ivec4> sorted(tets.size());
-    for (int32_t i = 0; i < inner; ++i) sorted[size_t(i)] = tets[size_t(order[i])];
-    tets.swap(sorted);
-  }
+  if (words.empty()) return Error{"tetrahedralization produced no tetrahedra"};
+  const std::vector<int32_t> order = curveOrder(words, tets);
+  std::vector<uint64_t>().swap(words);
+  const int32_t inner = int32_t(order.size());
 
-  std::vector<int32_t> used(P.size(), 0);
-  for (const auto& t : tets) {
-    for (int k = 0; k < 4; ++k) used[t[k]] = 1;
-  }
-  int unused = 0;
-  for (int32_t r : reps) unused += used[r] ? 0 : 1;
-  if (unused > 0) {
-    ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
-  }
-
-  // Neighbours: the backend's, renumbered, when every tetrahedron was kept (dropping a flat
-  // one leaves its neighbours pointing at nothing: then faces are matched instead). Faces
-  // with no tetrahedron beyond are on the hull.
+  // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
+  // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
+  // then faces are matched instead), the hull faces (no tetrahedron beyond) and the walk
+  // records, whose links across the hull are set with the outer cells below.
   auto face = [&](int32_t c, int k) {
     std::array<int32_t, 3> f{};
-    for (int j = 0, n = 0; j < 4; ++j) {
-      if (j != k) f[n++] = tets[c][j];
+    for (int j = 0, m = 0; j < 4; ++j) {
+      if (j != k) f[size_t(m++)] = s.cells[size_t(c)][j];
     }
     std::sort(f.begin(), f.end());
     return FaceRef{f, c, k};
   };
-  std::vector<glm::ivec4> tetNeighbours(tets.size(), glm::ivec4(-1));
+  std::vector<int32_t> used(P.size(), 0);
   std::vector<FaceRef> hull;
+  s.cells.reserve(size_t(inner) + hullFaces);
+  s.neighbours.reserve(size_t(inner) + hullFaces);
   if (flat == 0) {
-    for (int32_t c = 0; c < inner; ++c) {
-      const glm::ivec4 n = backendNeighbours[size_t(order[c])];
-      for (int k = 0; k < 4; ++k) {
-        if (n[k] >= 0) {
-          tetNeighbours[c][k] = newIndex[size_t(n[k])];
-        } else {
-          hull.push_back(face(c, k));
+    std::vector<int32_t> newIndex(tets.size());
+    for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
+    hull.reserve(hullFaces);
+    s.walk.reserve(size_t(inner));
+    for (int32_t i = 0; i < inner; ++i) {
+      // The backend's arrays are read in the new order, scattered over 20 MB: fetch a row
+      // kAhead cells ahead, and the renumbering entries of its neighbours half as far ahead
+      // (by then that row has arrived), so that the misses overlap.
+      constexpr int32_t kAhead = 16;
+      if (i + kAhead < inner) {
+        const size_t ahead = size_t(order[size_t(i + kAhead)]);
+        prefetch(&tets[ahead]);
+        prefetch(&backendNeighbours[ahead]);
+      }
+      if (i + kAhead / 2 < inner) {
+        for (int32_t n : backendNeighbours[size_t(order[size_t(i + kAhead / 2)])]) {
+          if (n >= 0) prefetch(&newIndex[size_t(n)]);
         }
       }
+      const size_t r = size_t(order[size_t(i)]);
+      const std::array<int32_t, 4>& t = tets[r];
+      const std::array<int32_t, 4>& n = backendNeighbours[r];
+      const glm::ivec4 cell(t[0], t[1], t[2], t[3]);
+      glm::ivec4 links(-1);
+      s.cells.push_back(cell);
+      for (int k = 0; k < 4; ++k) {
+        used[size_t(t[size_t(k)])] = 1;
+        if (n[size_t(k)] >= 0) {
+          links[k] = newIndex[size_t(n[size_t(k)])];
+        } else {
+          hull.push_back(face(i, k));
+        }
+      }
+      s.neighbours.push_back(links);
+      makeProbeWalkCell({P[size_t(t[0])], P[size_t(t[1])], P[size_t(t[2])], P[size_t(t[3])]},
+                        links, s.walk.emplace_back());
     }
   } else {
+    for (int32_t i = 0; i < inner; ++i) {
+      const std::array<int32_t, 4>& t = tets[size_t(order[size_t(i)])];
+      s.cells.push_back(glm::ivec4(t[0], t[1], t[2], t[3]));
+      for (int k = 0; k < 4; ++k) used[size_t(t[size_t(k)])] = 1;
+    }
+    s.neighbours.assign(size_t(inner), glm::ivec4(-1));
     std::vector<FaceRef> refs;
-    refs.reserve(tets.size() * 4);
+    refs.reserve(size_t(inner) * 4);
     for (int32_t c = 0; c < inner; ++c) {
       for (int k = 0; k < 4; ++k) refs.push_back(face(c, k));
     }
-    Result<std::vector<FaceRef>> open = linkFaces(refs, P.size(), tetNeighbours);
+    Result<std::vector<FaceRef>> open = linkFaces(refs, P.size(), s.neighbours);
     if (!open) return Error{open.error()};
     hull = std::move(open).value();
+  }
+  detail::Tets().swap(tets);  // the backend's arrays are no longer needed
+  detail::Tets().swap(backendNeighbours);
+  int unused = 0;
+  for (int32_t r : reps) unused += used[size_t(r)] ? 0 : 1;
+  if (unused > 0) {
+    ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
   }
 
   // Outer cells: hull triangles wound outwards, smallest index first, sorted.
@@ -346,7 +379,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   };
   std::vector<Outer> outers;
   for (const FaceRef& f : hull) {
-    const glm::ivec4 t = tets[f.cell];
+    const glm::ivec4 t = s.cells[size_t(f.cell)];
     std::array<int32_t, 3> v = f.key;
     if (orient3d(P[v[0]], P[v[1]], P[v[2]], P[t[f.slot]]) > 0.0) std::swap(v[1], v[2]);
     std::rotate(v.begin(), std::min_element(v.begin(), v.end()), v.end());
@@ -356,17 +389,15 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
             [](const Outer& a, const Outer& b) { return a.v < b.v; });
 
   s.innerCellCount = inner;
-  s.cells = std::move(tets);
-  s.neighbours = std::move(tetNeighbours);
-  s.cells.reserve(s.cells.size() + outers.size());
-  s.neighbours.reserve(s.cells.size() + outers.size());
+  const bool linkWalk = s.walk.size() == size_t(inner);
   std::vector<FaceRef> edges;
   for (size_t i = 0; i < outers.size(); ++i) {
     const int32_t c = inner + int32_t(i);
     const Outer& o = outers[i];
     s.cells.push_back(glm::ivec4(o.v[0], o.v[1], o.v[2], -1));
     s.neighbours.push_back(glm::ivec4(-1, -1, -1, o.tet));
-    s.neighbours[o.tet][o.slot] = c;
+    s.neighbours[size_t(o.tet)][o.slot] = c;
+    if (linkWalk) s.walk[size_t(o.tet)].next[o.slot] = c;
     for (int k = 0; k < 3; ++k) {
       int32_t a = o.v[(k + 1) % 3], b = o.v[(k + 2) % 3];
       if (a > b) std::swap(a, b);
@@ -641,7 +672,10 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.outerCells.size() != set.cells.size() - size_t(set.innerCellCount)) {
     set.outerCells.resize(set.cells.size() - size_t(set.innerCellCount));
   }
-  prepareProbeLookup(set);  // the seed grid's walks use it too
+  // build3 makes the walk records in its pass over the cells (unless it had to match faces).
+  if (set.dimension != 3 || set.walk.size() != size_t(set.innerCellCount)) {
+    prepareProbeLookup(set);
+  }
   buildProbeSeedGrid(set, settings.cellsPerSeed);
   Status st = validateProbeSet(set, "buildProbeTopology");
   if (!st) return Error{st.error()};

@@ -14,6 +14,7 @@
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
 #include "kiln/probe_set.h"
+#include "kiln_runtime.h"
 #include "probes/tetrahedralize.h"
 
 namespace kiln {
@@ -300,6 +301,68 @@ TEST(ProbeLookup, BatchMatchesSingleQueriesAndUpdatesHints) {
     EXPECT_EQ(hints[i], ref.cell);
     const ShL2Rgb one = interpolateProbes(s, ref);
     for (int k = 0; k < kShL2Count; ++k) EXPECT_EQ(sh[i].c[k], one.c[k]);
+  }
+}
+
+// The batch forms interleave several walks (probe_runtime.cpp); each point must still get
+// exactly the single lookup's result. Points inside and outside the hull, probe positions and
+// edge midpoints (undecided fast steps), without hints, with good hints and with stale ones
+// (any cell, outer cells included), on a grid (cospherical: exact steps) and random probes.
+TEST(ProbeLookup, InterleavedBatchGivesTheSingleLookupsResults) {
+  std::vector<glm::vec3> grid;
+  for (int z = 0; z < 12; ++z)
+    for (int y = 0; y < 12; ++y)
+      for (int x = 0; x < 12; ++x) grid.push_back(glm::vec3(x, y, z) * (2.0f / 11.0f) - 1.0f);
+  for (const ProbeSet& s : {build(cubeProbes(4000, 61), DelaunayBackend::Cgal),
+                            build(grid, DelaunayBackend::Cgal)}) {
+    std::mt19937 rng(62);
+    std::uniform_real_distribution<float> u(-1.5f, 1.5f);
+    std::uniform_int_distribution<int32_t> anyCell(0, s.cellCount() - 1);
+    std::uniform_int_distribution<int32_t> anyProbe(0, s.probeCount() - 1);
+    std::vector<glm::vec3> points(20000);
+    std::vector<int32_t> hints(points.size());
+    for (size_t i = 0; i < points.size(); ++i) {
+      points[i] = glm::vec3(u(rng), u(rng), u(rng));
+      if (i % 7 == 3) points[i] = s.positions[size_t(anyProbe(rng))];
+      if (i % 7 == 5) {
+        const glm::ivec4 t = s.cells[size_t(anyCell(rng) % s.innerCellCount)];
+        points[i] = 0.5f * (s.positions[size_t(t[0])] + s.positions[size_t(t[1])]);
+      }
+      hints[i] = i % 3 == 0 ? -1 : i % 3 == 1 ? anyCell(rng) : locateProbe(s, points[i]).cell;
+    }
+    for (bool withHints : {false, true}) {
+      std::vector<int32_t> h = hints;
+      std::vector<ProbeLocation> batch(points.size());
+      locateProbes(s, points, withHints ? std::span<int32_t>(h) : std::span<int32_t>{}, batch);
+      std::vector<ShL2Rgb> sh(points.size());
+      std::vector<glm::vec4> occlusion(points.size());
+      std::vector<int32_t> h2 = hints;
+      sampleProbes(s, points, withHints ? std::span<int32_t>(h2) : std::span<int32_t>{}, sh,
+                   occlusion);
+      int outside = 0, walked = 0;
+      for (size_t i = 0; i < points.size(); ++i) {
+        const ProbeLocation one = locateProbe(s, points[i], withHints ? hints[i] : -1);
+        const ProbeLocation& b = batch[i];
+        ASSERT_EQ(b.cell, one.cell) << i;
+        ASSERT_EQ(b.probes, one.probes) << i;
+        ASSERT_EQ(b.weights, one.weights) << i;
+        ASSERT_EQ(b.barycentric, one.barycentric) << i;
+        ASSERT_EQ(b.steps, one.steps) << i;
+        ASSERT_EQ(b.bruteForce, one.bruteForce) << i;
+        if (withHints) {
+          ASSERT_EQ(h[i], one.cell);
+          ASSERT_EQ(h2[i], one.cell);
+        }
+        const ShL2Rgb ref = interpolateProbes(s, one);
+        for (int k = 0; k < kShL2Count; ++k) ASSERT_EQ(sh[i].c[k], ref.c[k]) << i;
+        ASSERT_EQ(occlusion[i], interpolateOcclusion(s, one)) << i;
+        outside += one.cell >= s.innerCellCount;
+        walked += one.steps > 2;
+      }
+      // The cases the interleaving hands over to the single walk occur, and so do long walks.
+      EXPECT_GT(outside, int(points.size()) / 10);
+      EXPECT_GT(walked, int(points.size()) / 10);
+    }
   }
 }
 
@@ -596,4 +659,77 @@ TEST(ProbeFile, RandomCorruptionNeverCrashes) {
 }
 
 }  // namespace
+// The C batch (kiln_probes_sample_batch_blend) takes its cells from the interleaved C++
+// batch a chunk at a time and weights each point with its own normal: against single C
+// lookups with the same normals, on a file with visibility maps (so the normals matter), over
+// several chunks, with and without hints.
+TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
+  ProbeSet s = build(cubeProbes(1500, 71), DelaunayBackend::Cgal);
+  s.visibility.resolution = kMinVisibilityResolution;
+  s.visibility.maxDistance.assign(size_t(s.probeCount()), 1.0f);
+  s.visibility.moments.resize(size_t(s.probeCount()) * s.visibility.valuesPerProbe());
+  std::mt19937 rng(72);
+  std::uniform_int_distribution<int> depth(2000, 40000);
+  for (size_t t = 0; t < s.visibility.moments.size(); t += kVisibilityValuesPerTexel) {
+    const int mu = depth(rng);
+    s.visibility.moments[t] = uint16_t(mu);
+    s.visibility.moments[t + 1] = uint16_t(mu / 20);
+    s.visibility.moments[t + 2] = uint16_t(std::min(65535, mu + mu / 4));
+  }
+  const std::string path = tempPath("c_batch.kprobe");
+  ASSERT_TRUE(writeProbeFile(s, path).ok());
+  kiln_probes* probes = nullptr;
+  ASSERT_EQ(kiln_probes_load(path.c_str(), &probes), KILN_OK) << kiln_last_error();
+  std::filesystem::remove(path);
+  std::uniform_real_distribution<float> u(-1.3f, 1.3f);
+  std::normal_distribution<float> g;
+  const size_t n = 300;  // several chunks and a partial one
+  std::vector<float> positions(3 * n), normals(3 * n);
+  std::vector<int32_t> hints(n);
+  for (size_t i = 0; i < n; ++i) {
+    const glm::vec3 d = glm::normalize(glm::vec3(g(rng), g(rng), g(rng)));
+    for (int a = 0; a < 3; ++a) {
+      positions[3 * i + size_t(a)] = u(rng);
+      normals[3 * i + size_t(a)] = d[a];
+    }
+    hints[i] = i % 2 ? int32_t(i * 37 % size_t(s.cellCount())) : -1;
+  }
+  kiln_probe_blend blend;
+  ASSERT_EQ(kiln_probe_blend_defaults(&blend), KILN_OK);
+  int hidden = 0;
+  for (bool withHints : {false, true}) {
+    std::vector<int32_t> h = hints;
+    std::vector<kiln_probe_location> batch(n);
+    std::vector<float> sh(27 * n);
+    ASSERT_EQ(kiln_probes_sample_batch_blend(probes, n, positions.data(), normals.data(), &blend,
+                                             withHints ? h.data() : nullptr, batch.data(),
+                                             sh.data()),
+              KILN_OK)
+        << kiln_last_error();
+    for (size_t i = 0; i < n; ++i) {
+      kiln_probe_blend one = blend;
+      std::memcpy(one.normal, &normals[3 * i], sizeof(one.normal));
+      kiln_probe_location loc;
+      ASSERT_EQ(kiln_probes_locate_blend(probes, &positions[3 * i], withHints ? hints[i] : -1,
+                                         &one, &loc),
+                KILN_OK);
+      float ref[27];
+      ASSERT_EQ(kiln_probes_sample_sh(probes, &loc, ref), KILN_OK);
+      ASSERT_EQ(batch[i].cell, loc.cell) << i;
+      if (withHints) {
+        ASSERT_EQ(h[i], loc.cell) << i;
+      }
+      for (int k = 0; k < 4; ++k) {
+        ASSERT_EQ(batch[i].probes[k], loc.probes[k]) << i;
+        ASSERT_EQ(batch[i].weights[k], loc.weights[k]) << i;
+        ASSERT_EQ(batch[i].barycentric[k], loc.barycentric[k]) << i;
+        hidden += loc.weights[k] != loc.barycentric[k];
+      }
+      for (int k = 0; k < 27; ++k) ASSERT_EQ(sh[27 * i + size_t(k)], ref[k]) << i;
+    }
+  }
+  EXPECT_GT(hidden, int(n) / 4) << "the visibility weighting changes weights";
+  kiln_probes_release(probes);
+}
+
 }  // namespace kiln

@@ -3,7 +3,9 @@
 // Lookups (kiln::locateProbe, Cupisz's walk) on N random probes in a 10 m cube:
 //   - Hinted: an object moving along a smooth closed path, each lookup starting from the
 //     previous one's cell (the per-object cache of Cupisz 2012);
-//   - Unhinted: uniformly random points, each walk starting from the seed grid;
+//   - Unhinted: uniformly random points, each walk starting from the seed grid, one call per
+//     point, and (UnhintedBatch) the same points through the batch form, which interleaves
+//     several walks;
 //   - CGAL: Delaunay_triangulation_3::locate on the same random points (no hint) and on the
 //     path (hinted with the previous cell), CGAL's own triangulation of the same probes;
 //   - BruteForce: a scan of every tetrahedron (barycentric test), the baseline a lookup
@@ -112,6 +114,24 @@ void BM_LocateUnhinted(benchmark::State& state) {
       steps += loc.steps;
       benchmark::DoNotOptimize(loc);
     }
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
+  state.counters["cells_per_lookup"] =
+      double(steps) / double(int64_t(state.iterations()) * kQueryCount);
+}
+
+// The same random points as BM_LocateUnhinted through the batch form (locateProbes, no
+// hints), which interleaves several walks so that their cache misses overlap: the figure for
+// a caller that looks up many objects at once (a frame's dynamic objects).
+void BM_LocateUnhintedBatch(benchmark::State& state) {
+  const Fixture& f = fixture(int(state.range(0)));
+  const std::vector<glm::vec3> points = randomPoints(kQueryCount, 2);
+  std::vector<ProbeLocation> out(points.size());
+  size_t steps = 0;
+  for (auto _ : state) {
+    locateProbes(f.set, points, {}, out);
+    for (const ProbeLocation& loc : out) steps += loc.steps;
+    benchmark::DoNotOptimize(out.data());
   }
   state.SetItemsProcessed(int64_t(state.iterations()) * kQueryCount);
   state.counters["cells_per_lookup"] =
@@ -288,6 +308,7 @@ void BM_CgalDelaunay(benchmark::State& state) {
 
 BENCHMARK(BM_LocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateUnhinted)->Arg(1000)->Arg(10000)->Arg(100000);
+BENCHMARK(BM_LocateUnhintedBatch)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_CgalLocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_CgalLocateRandom)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateBruteForce)->Arg(1000);

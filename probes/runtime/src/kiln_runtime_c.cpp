@@ -2,6 +2,7 @@
 // entry point catches C++ exceptions and turns them into status codes (as Embree does).
 #include "kiln_runtime.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -148,17 +149,36 @@ kiln_status sampleBatch(const char* function, const kiln_probes* probes, size_t 
         }
       }
     }
-    for (size_t i = 0; i < count; ++i) {
-      const float* p = positions + 3 * i;
-      if (normals) {
-        const float* n = normals + 3 * i;
-        settings.normal = glm::vec3(n[0], n[1], n[2]);
+    // The cells come from the C++ batch form (interleaved walks) a chunk at a time, with plain
+    // weights; each point's own blend (its normal) then weights them, as locateProbe would.
+    constexpr size_t kChunk = 64;
+    glm::vec3 points[kChunk];
+    int32_t chunkHints[kChunk];
+    kiln::ProbeLocation locations[kChunk];
+    kiln::ProbeBlendSettings cellsOnly = settings;
+    cellsOnly.visibility = false;
+    for (size_t first = 0; first < count; first += kChunk) {
+      const size_t n = std::min(kChunk, count - first);
+      for (size_t i = 0; i < n; ++i) {
+        const float* p = positions + 3 * (first + i);
+        points[i] = glm::vec3(p[0], p[1], p[2]);
+        chunkHints[i] = hints ? hints[first + i] : -1;
       }
-      const kiln::ProbeLocation loc = kiln::locateProbe(probes->set, glm::vec3(p[0], p[1], p[2]),
-                                                        hints ? hints[i] : -1, settings);
-      if (hints) hints[i] = loc.cell;
-      if (out_locations) toC(loc, out_locations + i);
-      if (out_sh) shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh + 27 * i);
+      kiln::locateProbes(probes->set, std::span<const glm::vec3>(points, n),
+                         std::span<int32_t>(chunkHints, n),
+                         std::span<kiln::ProbeLocation>(locations, n), cellsOnly);
+      for (size_t i = 0; i < n; ++i) {
+        const size_t at = first + i;
+        if (normals) {
+          const float* nv = normals + 3 * at;
+          settings.normal = glm::vec3(nv[0], nv[1], nv[2]);
+        }
+        kiln::ProbeLocation& loc = locations[i];
+        kiln::weightByVisibility(probes->set, points[i], loc, settings);
+        if (hints) hints[at] = loc.cell;
+        if (out_locations) toC(loc, out_locations + at);
+        if (out_sh) shToFloats(kiln::interpolateProbes(probes->set, loc), out_sh + 27 * at);
+      }
     }
     return ok();
   });

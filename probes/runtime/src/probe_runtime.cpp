@@ -14,11 +14,13 @@
 #include <limits>
 
 #include "kiln/predicates.h"
+#include "prefetch.h"
 
 namespace kiln {
 namespace {
 
 using glm::dvec3;
+using runtime_detail::prefetch;
 
 // Outer-cell barycentrics this far below zero still count as inside (then clamped); keeps
 // neighbouring outer cells from both rejecting a point on their shared swept edge.
@@ -222,9 +224,12 @@ OuterEval evalOuter(const ProbeSet& s, int32_t cell, glm::vec3 p) {
   return e;
 }
 
-int32_t seedCell(const ProbeSet& s, glm::vec3 p) {
+// The index into grid.seeds of the grid cell around p (the nearest one outside the grid), or
+// kNoSeed when the set has no grid.
+constexpr size_t kNoSeed = ~size_t(0);
+size_t seedSlot(const ProbeSet& s, glm::vec3 p) {
   const ProbeSeedGrid& g = s.grid;
-  if (g.size.x <= 0 || g.seeds.empty()) return 0;
+  if (g.size.x <= 0 || g.seeds.empty()) return kNoSeed;
   glm::ivec3 idx;
   for (int a = 0; a < 3; ++a) {
     const float ext = g.max[a] - g.min[a];
@@ -232,8 +237,14 @@ int32_t seedCell(const ProbeSet& s, glm::vec3 p) {
     if (!(f >= 0.0f)) f = 0.0f;  // also catches NaN
     idx[a] = std::min(int(std::min(f, 1e9f)), g.size[a] - 1);
   }
-  return g.seeds[size_t(idx.x) + size_t(g.size.x) * (size_t(idx.y) + size_t(g.size.y) * idx.z)];
+  return size_t(idx.x) + size_t(g.size.x) * (size_t(idx.y) + size_t(g.size.y) * idx.z);
 }
+
+int32_t seedAt(const ProbeSet& s, size_t slot) {
+  return slot == kNoSeed ? 0 : s.grid.seeds[slot];
+}
+
+int32_t seedCell(const ProbeSet& s, glm::vec3 p) { return seedAt(s, seedSlot(s, p)); }
 
 void setTet(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const double b[4]) {
   const glm::ivec4 t = s.cells[cell];
@@ -343,6 +354,16 @@ inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
   return k;
 }
 
+// finish()'s work for a fast step that ended inside (every l_k finite and positive). The
+// coordinates need no normalising: l_0 = ((1 - l_1) - l_2) - l_3 makes their sum 1 within
+// three roundings (each l_k < 1 inside), as close as dividing by the sum would.
+inline void setFast(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const float l[4]) {
+  const glm::ivec4 t = s.cells[size_t(cell)];
+  loc.cell = cell;
+  loc.probes = {t[0], t[1], t[2], t[3]};
+  loc.barycentric = {l[0], l[1], l[2], l[3]};
+}
+
 // The walk: with `walk` (the set's records) each step tries fastStep first; without, every
 // step is exact (locateProbeExact).
 void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
@@ -356,14 +377,7 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
         float l[4];
         exit = fastStep(walk[cell], p, l);
         if (exit == -1) {
-          // finish()'s work without its checks: inside, every l_k is finite and positive.
-          const glm::ivec4 t = s.cells[size_t(cell)];
-          const double b0 = l[0], b1 = l[1], b2 = l[2], b3 = l[3];
-          const double inverse = 1.0 / (((b0 + b1) + b2) + b3);
-          loc.cell = cell;
-          loc.probes = {t[0], t[1], t[2], t[3]};
-          loc.barycentric = {float(b0 * inverse), float(b1 * inverse), float(b2 * inverse),
-                             float(b3 * inverse)};
+          setFast(s, loc, cell, l);
           return;
         }
       }
@@ -388,6 +402,112 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
     cell = next;
   }
   scan3(s, p, loc);
+}
+
+// ---- dimension 3: interleaved walks (the batch forms) --------------------------------------
+//
+// A walk through a large set misses the cache at nearly every step (the grid's seed, then each
+// record: a 100k-probe set's records fill 42 MB), and a single walk cannot overlap those
+// misses, since each step's address comes from the step before. The batch forms advance up to
+// kInterleavedWalks points' walks in turn instead: each walk's next record is prefetched when
+// its step is decided and read a round later, by which time the other walks' steps have hidden
+// most of its latency. Only fast steps between inner cells are taken here; any other step
+// (near a face, an outer cell, the hull) finishes that point with locate3 from the cell its
+// walk has reached, which is the same walk's continuation. So each point gets locateProbe's
+// cell, weights and steps (steps may differ only on a walk that reaches the step cap).
+constexpr int kInterleavedWalks = 8;
+
+struct InterleavedWalk {
+  glm::vec3 p{0.0f};
+  size_t index = 0;     // into the points
+  size_t seed = 0;      // grid slot still to be read (cell < 0)
+  int32_t cell = -1;    // the cell whose record the next round reads; -1: read the seed first
+  uint16_t visited = 0; // cells left behind so far
+};
+
+// Calls emit(i, location) once for each point i, in no particular order. `hints`: null, or
+// one hint per point (read before that point's walk starts).
+template <typename Emit>
+void locateInterleaved(const ProbeSet& s, std::span<const glm::vec3> points,
+                       const int32_t* hints, const ProbeBlendSettings& blend, Emit&& emit) {
+  const ProbeWalkCell* walk = s.walk.data();
+  const int32_t inner = s.innerCellCount;
+  size_t nextPoint = 0;
+  auto fetch = [&](int32_t cell) {
+    if (cell < inner) prefetch(&walk[cell]);
+    prefetch(&s.cells[size_t(cell)]);
+  };
+  auto start = [&](InterleavedWalk& w) {
+    if (nextPoint >= points.size()) return false;
+    w.index = nextPoint++;
+    w.p = points[w.index];
+    w.visited = 0;
+    const int32_t hint = hints ? hints[w.index] : -1;
+    if (hint >= 0 && hint < s.cellCount()) {
+      w.cell = hint;
+      fetch(hint);
+    } else {
+      w.cell = -1;
+      w.seed = seedSlot(s, w.p);
+      if (w.seed != kNoSeed) prefetch(&s.grid.seeds[w.seed]);
+    }
+    return true;
+  };
+  InterleavedWalk walks[kInterleavedWalks];
+  bool live[kInterleavedWalks];
+  int active = 0;
+  for (int k = 0; k < kInterleavedWalks; ++k) active += (live[k] = start(walks[k])) ? 1 : 0;
+  while (active > 0) {
+    for (int k = 0; k < kInterleavedWalks; ++k) {
+      if (!live[k]) continue;
+      InterleavedWalk& w = walks[k];
+      if (w.cell < 0) {
+        w.cell = seedAt(s, w.seed);
+        fetch(w.cell);
+        continue;
+      }
+      ProbeLocation loc;
+      bool found = false;
+      if (w.cell < inner && w.visited < kMaxWalkSteps) {
+        float l[4];
+        const int exit = fastStep(walk[w.cell], w.p, l);
+        if (exit == -1) {
+          setFast(s, loc, w.cell, l);
+          loc.steps = uint16_t(w.visited + 1);
+          found = true;
+        } else if (exit >= 0) {
+          const int32_t next = walk[w.cell].next[exit];
+          if (next >= 0 && next < inner) {
+            w.cell = next;
+            ++w.visited;
+            fetch(next);
+            continue;
+          }
+        }
+      }
+      if (!found) {
+        locate3(s, w.p, w.cell, loc, walk);
+        loc.steps = uint16_t(std::min(int(loc.steps) + int(w.visited), 65535));
+      }
+      weightByVisibility(s, w.p, loc, blend);
+      emit(w.index, loc);
+      if (!(live[k] = start(w))) --active;
+    }
+  }
+}
+
+// The batch forms' lookups: interleaved where the set has walk records, else one by one.
+template <typename Emit>
+void locateMany(const ProbeSet& s, std::span<const glm::vec3> points, const int32_t* hints,
+                const ProbeBlendSettings& blend, Emit&& emit) {
+  if (s.dimension == 3 && s.innerCellCount > 0 && s.walk.size() == size_t(s.innerCellCount) &&
+      s.cells.size() >= size_t(s.innerCellCount)) {
+    locateInterleaved(s, points, hints, blend, emit);
+    return;
+  }
+  for (size_t i = 0; i < points.size(); ++i) {
+    emit(i, locateProbe(s, points[i], hints ? hints[i] : -1, blend));
+  }
 }
 
 // ---- dimension 2 -------------------------------------------------------------------------
@@ -597,9 +717,12 @@ bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
   const double detError = glm::dot(glm::abs(e[0]), error[0]) +
                           0x1p-51 * glm::dot(glm::abs(e[0]), glm::abs(c[0]));
   if (!(det > 0.0) || !(detError <= 0x1p-28 * det)) return false;
+  // Multiplying by 1 / det adds two double roundings (2^-52 relative) to the entries' error:
+  // nothing beside the float rounding.
+  const double inverse = 1.0 / det;
   for (int k = 0; k < 3; ++k) {
     for (int a = 0; a < 3; ++a) {
-      const float f = float(c[k][a] / det);
+      const float f = float(c[k][a] * inverse);
       if (f != 0.0f && !std::isnormal(f)) return false;
       rows[size_t(k)][a] = f;
     }
@@ -609,27 +732,46 @@ bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
 
 }  // namespace
 
+void makeProbeWalkCell(const std::array<glm::vec3, 4>& v, glm::ivec4 next, ProbeWalkCell& w) {
+  w.origin = v[0];
+  w.next = next;
+  if (!walkRows(v.data(), w.rows)) w.rows.fill(glm::vec3(std::numeric_limits<float>::quiet_NaN()));
+}
+
 void prepareProbeLookup(ProbeSet& s) {
   s.walk.clear();
   if (s.dimension != 3 || s.innerCellCount <= 0 || s.cells.size() < size_t(s.innerCellCount) ||
       s.neighbours.size() < size_t(s.innerCellCount)) {
     return;
   }
-  s.walk.resize(size_t(s.innerCellCount));
-  const float nan = std::numeric_limits<float>::quiet_NaN();
+  s.walk.reserve(size_t(s.innerCellCount));
   for (int32_t c = 0; c < s.innerCellCount; ++c) {
     const glm::ivec4 t = s.cells[size_t(c)];
-    const glm::vec3 v[4] = {s.positions[size_t(t[0])], s.positions[size_t(t[1])],
-                            s.positions[size_t(t[2])], s.positions[size_t(t[3])]};
-    ProbeWalkCell& w = s.walk[size_t(c)];
-    w.origin = v[0];
-    w.next = s.neighbours[size_t(c)];
-    if (!walkRows(v, w.rows)) w.rows.fill(glm::vec3(nan));
+    makeProbeWalkCell({s.positions[size_t(t[0])], s.positions[size_t(t[1])],
+                       s.positions[size_t(t[2])], s.positions[size_t(t[3])]},
+                      s.neighbours[size_t(c)], s.walk.emplace_back());
   }
 }
 
 ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
                           const ProbeBlendSettings& blend) noexcept {
+  // The common case first: a hint whose cell still holds p (an object that stayed in its
+  // cell since the last lookup) takes one fast step and nothing else.
+  if (uint32_t(hint) < uint32_t(s.innerCellCount) && s.dimension == 3 &&
+      s.walk.size() == size_t(s.innerCellCount)) {
+    float l[4];
+    if (fastStep(s.walk[size_t(hint)], p, l) == -1) {
+      ProbeLocation loc;
+      setFast(s, loc, hint, l);
+      loc.steps = 1;
+      if (blend.visibility && !s.visibility.empty()) {
+        weightByVisibility(s, p, loc, blend);
+      } else {
+        loc.weights = loc.barycentric;
+      }
+      return loc;
+    }
+  }
   return locate(s, p, hint, blend, true);
 }
 
@@ -706,21 +848,19 @@ void locateProbes(const ProbeSet& s, std::span<const glm::vec3> points,
                   const ProbeBlendSettings& blend) noexcept {
   const bool useHints = hints.size() == points.size();
   const size_t n = std::min(points.size(), out.size());
-  for (size_t i = 0; i < n; ++i) {
-    out[i] = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
-    if (useHints) hints[i] = out[i].cell;
-  }
+  locateMany(s, points.first(n), useHints ? hints.data() : nullptr, blend,
+             [&](size_t i, const ProbeLocation& loc) {
+               out[i] = loc;
+               if (useHints) hints[i] = loc.cell;
+             });
 }
 
 void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
                   std::span<ShL2Rgb> out, const ProbeBlendSettings& blend) noexcept {
-  const bool useHints = hints.size() == points.size();
   const size_t n = std::min(points.size(), out.size());
-  for (size_t i = 0; i < n; ++i) {
-    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
-    if (useHints) hints[i] = loc.cell;
-    out[i] = interpolateProbes(s, loc);
-  }
+  sampleProbes(s, points.first(n),
+               hints.size() == points.size() ? hints.first(n) : std::span<int32_t>{},
+               out.first(n), {}, blend);
 }
 
 void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::span<int32_t> hints,
@@ -729,12 +869,12 @@ void sampleProbes(const ProbeSet& s, std::span<const glm::vec3> points, std::spa
   const bool useHints = hints.size() == points.size();
   const bool wantSh = sh.size() == points.size();
   const bool wantOcclusion = occlusion.size() == points.size();
-  for (size_t i = 0; i < points.size(); ++i) {
-    const ProbeLocation loc = locateProbe(s, points[i], useHints ? hints[i] : -1, blend);
-    if (useHints) hints[i] = loc.cell;
-    if (wantSh) sh[i] = interpolateProbes(s, loc);
-    if (wantOcclusion) occlusion[i] = interpolateOcclusion(s, loc);
-  }
+  locateMany(s, points, useHints ? hints.data() : nullptr, blend,
+             [&](size_t i, const ProbeLocation& loc) {
+               if (useHints) hints[i] = loc.cell;
+               if (wantSh) sh[i] = interpolateProbes(s, loc);
+               if (wantOcclusion) occlusion[i] = interpolateOcclusion(s, loc);
+             });
 }
 
 }  // namespace kiln

@@ -12,6 +12,7 @@
 
 #include "binary_file.h"
 #include "kiln/probe_runtime.h"
+#include "prefetch.h"
 
 namespace kiln {
 
@@ -21,6 +22,8 @@ static_assert(sizeof(ShL2Rgb) == 27 * sizeof(float), "ShL2Rgb must be 27 packed 
 static_assert(sizeof(glm::vec3) == 12 && sizeof(glm::ivec4) == 16 && sizeof(glm::vec4) == 16);
 
 namespace {
+
+using runtime_detail::prefetch;
 
 // Limits that keep every size computation far from overflow.
 constexpr uint32_t kMaxProbes = 1u << 26;
@@ -189,6 +192,88 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
   return Status::success();
 }
 
+// Every cell slot as validateProbeSet requires it (probe indices in range in used slots, -1 in
+// unused ones, neighbour indices in range, every link linked back), in one pass without
+// branches on the data; sizes must already agree.
+bool cellSlotsValid(const ProbeSet& s) {
+  const size_t np = s.positions.size(), nc = s.cells.size();
+  const size_t inner = size_t(s.innerCellCount);
+  bool ok = true;
+  auto cells = [&](size_t first, size_t last, int used) {
+    for (size_t c = first; c < last; ++c) {
+      // The linked cells' rows lie anywhere in the array: fetch those of the cell kAhead
+      // places on (its own row is read in order), so that the misses overlap.
+      constexpr size_t kAhead = 8;
+      if (c + kAhead < last) {
+        const glm::ivec4 ahead = s.neighbours[c + kAhead];
+        for (int k = 0; k < 4; ++k) {
+          if (uint32_t(ahead[k]) < nc) prefetch(&s.neighbours[size_t(ahead[k])]);
+        }
+      }
+      const glm::ivec4 v = s.cells[c], n = s.neighbours[c];
+      const int32_t ci = int32_t(c);
+      for (int k = 0; k < 4; ++k) {
+        ok &= k < used ? uint32_t(v[k]) < np : v[k] == -1;
+        ok &= uint32_t(n[k] + 1) <= nc;  // -1 .. nc - 1
+        // Read the named cell's links only when the index is in range (else a link to c
+        // itself stands in, and the range test above has already failed).
+        const glm::ivec4 back = s.neighbours[uint32_t(n[k]) < nc ? size_t(n[k]) : c];
+        ok &= n[k] < 0 || back[0] == ci || back[1] == ci || back[2] == ci || back[3] == ci;
+      }
+    }
+  };
+  cells(0, inner, usedSlots(s.dimension, false));
+  cells(inner, nc, usedSlots(s.dimension, true));
+  return ok;
+}
+
+// The first slot cellSlotsValid rejects, as validateProbeSet's message.
+Status describeBadSlot(const ProbeSet& s, std::string_view name) {
+  const size_t np = s.positions.size(), nc = s.cells.size();
+  auto slotField = [](const char* array, size_t c, int k) {
+    return std::string(array) + "[" + std::to_string(c) + "][" + std::to_string(k) + "]";
+  };
+  int64_t asymmetricCell = -1;
+  int asymmetricSlot = 0;
+  for (size_t c = 0; c < nc; ++c) {
+    const bool isOuter = c >= size_t(s.innerCellCount);
+    const int used = usedSlots(s.dimension, isOuter);
+    for (int k = 0; k < 4; ++k) {
+      const int32_t v = s.cells[c][k];
+      if (k < used && (v < 0 || size_t(v) >= np)) {
+        return fail(name, slotField("cells", c, k) + ": probe index " + std::to_string(v) +
+                              " out of range (probeCount " + std::to_string(np) + ")");
+      }
+      if (k >= used && v != -1) {
+        return fail(name, slotField("cells", c, k) + ": unused slot must be -1");
+      }
+      const int32_t n = s.neighbours[c][k];
+      if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
+        return fail(name, slotField("neighbours", c, k) + ": cell index " + std::to_string(n) +
+                              " out of range");
+      }
+      // Symmetry in the same pass (this index is in range; the cell it names may not be
+      // checked yet, but only compared with c). Reported after the range checks, as the
+      // first asymmetric slot, so an out-of-range index is named as such wherever it is.
+      if (n >= 0 && asymmetricCell < 0) {
+        const glm::ivec4 back = s.neighbours[size_t(n)];
+        const int32_t ci = int32_t(c);
+        if (back[0] != ci && back[1] != ci && back[2] != ci && back[3] != ci) {
+          asymmetricCell = int64_t(c);
+          asymmetricSlot = k;
+        }
+      }
+    }
+  }
+  if (asymmetricCell >= 0) {
+    const size_t c = size_t(asymmetricCell);
+    return fail(name, slotField("neighbours", c, asymmetricSlot) + ": cell " +
+                          std::to_string(s.neighbours[c][asymmetricSlot]) +
+                          " does not link back (asymmetric neighbours)");
+  }
+  return Status::success();
+}
+
 }  // namespace
 
 uint64_t fnv1a64(std::span<const uint8_t> bytes, uint64_t hash) {
@@ -351,48 +436,10 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
       }
     }
   }
-  // The per-slot loops test first and build their message only on failure (a 100k-probe
-  // set has millions of slots).
-  auto slotField = [](const char* array, size_t c, int k) {
-    return std::string(array) + "[" + std::to_string(c) + "][" + std::to_string(k) + "]";
-  };
-  int64_t asymmetricCell = -1;
-  int asymmetricSlot = 0;
-  for (size_t c = 0; c < nc; ++c) {
-    const bool isOuter = c >= size_t(s.innerCellCount);
-    const int used = usedSlots(s.dimension, isOuter);
-    for (int k = 0; k < 4; ++k) {
-      const int32_t v = s.cells[c][k];
-      if (k < used && (v < 0 || size_t(v) >= np)) {
-        return fail(name, slotField("cells", c, k) + ": probe index " + std::to_string(v) +
-                              " out of range (probeCount " + std::to_string(np) + ")");
-      }
-      if (k >= used && v != -1) {
-        return fail(name, slotField("cells", c, k) + ": unused slot must be -1");
-      }
-      const int32_t n = s.neighbours[c][k];
-      if (n < -1 || (n >= 0 && size_t(n) >= nc)) {
-        return fail(name, slotField("neighbours", c, k) + ": cell index " + std::to_string(n) +
-                              " out of range");
-      }
-      // Symmetry in the same pass (this index is in range; the cell it names may not be
-      // checked yet, but only compared with c). Reported after the range checks, as the
-      // first asymmetric slot, so an out-of-range index is named as such wherever it is.
-      if (n >= 0 && asymmetricCell < 0) {
-        const glm::ivec4 back = s.neighbours[size_t(n)];
-        const int32_t ci = int32_t(c);
-        if (back[0] != ci && back[1] != ci && back[2] != ci && back[3] != ci) {
-          asymmetricCell = int64_t(c);
-          asymmetricSlot = k;
-        }
-      }
-    }
-  }
-  if (asymmetricCell >= 0) {
-    const size_t c = size_t(asymmetricCell);
-    return fail(name, slotField("neighbours", c, asymmetricSlot) + ": cell " +
-                          std::to_string(s.neighbours[c][asymmetricSlot]) +
-                          " does not link back (asymmetric neighbours)");
+  // The per-slot checks run first as one branch-free pass (a 100k-probe set has millions of
+  // slots); only when it finds a problem do the loops below run, to name it.
+  if (!cellSlotsValid(s)) {
+    if (Status st = describeBadSlot(s, name); !st) return st;
   }
   for (size_t i = 0; i < outer; ++i) {
     const OuterCell& oc = s.outerCells[i];

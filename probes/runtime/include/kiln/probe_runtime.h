@@ -85,7 +85,11 @@ inline glm::vec3 probeIrradiance(const ShL2Rgb& sh, glm::vec3 n) noexcept {
 
 // Batch forms. `hints` is empty or has points.size() entries: each entry is read as the hint
 // for its point and overwritten with the cell found. `out` must have points.size() entries.
-// `blend` applies to every point (its normal too; zero for object centres).
+// `blend` applies to every point (its normal too; zero for object centres). Each point gets
+// exactly locateProbe's result (cell, weights; steps too unless a walk reaches the step
+// cap), but the walks of several points advance in turn, so that their cache misses overlap:
+// on a large set without hints (or with stale ones) a batch costs much less per point than
+// the same number of single calls.
 void locateProbes(const ProbeSet& set, std::span<const glm::vec3> points,
                   std::span<int32_t> hints, std::span<ProbeLocation> out,
                   const ProbeBlendSettings& blend = {}) noexcept;

@@ -144,6 +144,11 @@ void computeOuterCellCubics(ProbeSet& set);
 // Fills set.walk from positions, cells and neighbours (dimension 3; cleared otherwise).
 // Requires a complete, valid topology (validateProbeSet).
 void prepareProbeLookup(ProbeSet& set);
+// One inner cell's record as prepareProbeLookup makes it, from the tetrahedron's four
+// positions (positively oriented) and its neighbours: for a builder that writes the records in
+// its own pass over the cells (buildProbeTopology).
+void makeProbeWalkCell(const std::array<glm::vec3, 4>& corners, glm::ivec4 next,
+                       ProbeWalkCell& out);
 
 // Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most kSeedGridMaxAxis
 // per axis, each seed a cell whose centroid lies in the grid cell (the one nearest its
