@@ -7,7 +7,11 @@
 //     point, and (UnhintedBatch) the same points through the batch form, which interleaves
 //     several walks;
 //   - CGAL: Delaunay_triangulation_3::locate on the same random points (no hint) and on the
-//     path (hinted with the previous cell), CGAL's own triangulation of the same probes;
+//     path (hinted with the previous cell), CGAL's own triangulation of the same probes (the
+//     same Delaunay cells for points in general position). The two hinted loops do the same
+//     walk from the same hints (the previous query's cell); kiln's also computes the four
+//     barycentric weights and fills a ProbeLocation (probes, weights, steps), where CGAL's
+//     returns only the cell: the comparison favours CGAL;
 //   - BruteForce: a scan of every tetrahedron (barycentric test), the baseline a lookup
 //     structure must beat, on fewer probes;
 //   - BlendHinted: the hinted path's lookup plus the SH blend (locateProbe + interpolateProbes),
