@@ -31,6 +31,7 @@
 #include "lightmap/lightmap_baker.h"
 
 #include <array>
+#include <cassert>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -965,13 +966,16 @@ void postPage(const Scene& scene, const AtlasLayout& layout, uint32_t pageIndex,
   }
 }
 
-// The first pass's pages as a BounceCache: a hit's lightmap UV through its object's
-// scaleOffset to its page, read bilinearly between texel centres (the pages are dilated into
-// their padding, so a read at a chart's border takes no black).
+// The first pass's pages (RGB) as a BounceCache: a hit's lightmap UV through its object's
+// scaleOffset to its page, read bilinearly between texel centres with the seam stitcher's
+// lookup (sampleBilinear, clamped to the page's edge texels; the pages are dilated into their
+// padding, so a read at a chart's border takes no black).
 class LightmapBounceCache final : public BounceCache {
  public:
   LightmapBounceCache(const Scene& scene, const AtlasLayout& layout, std::vector<Image> pages)
-      : scene_(scene), layout_(layout), pages_(std::move(pages)) {}
+      : scene_(scene), layout_(layout), pages_(std::move(pages)) {
+    for ([[maybe_unused]] const Image& page : pages_) assert(page.channels == 3);
+  }
 
   bool lookup(uint32_t object, uint32_t triangle, vec2 bary, vec3& value) const override {
     const AtlasObject& a = layout_.objects[object];
@@ -982,15 +986,9 @@ class LightmapBounceCache final : public BounceCache {
     const uvec3 t = o.triangles[triangle];
     const vec2 uv = (1.0f - bary.x - bary.y) * o.uv1[t.x] + bary.x * o.uv1[t.y] +
                     bary.y * o.uv1[t.z];
-    const float x = (uv.x * a.scaleOffset.x + a.scaleOffset.z) * float(page.width) - 0.5f;
-    const float y = (uv.y * a.scaleOffset.y + a.scaleOffset.w) * float(page.height) - 0.5f;
-    const float fx = std::floor(x), fy = std::floor(y);
-    const float tx = x - fx, ty = y - fy;
-    const int x0 = std::clamp(int(fx), 0, page.width - 1);
-    const int y0 = std::clamp(int(fy), 0, page.height - 1);
-    const int x1 = std::min(x0 + 1, page.width - 1), y1 = std::min(y0 + 1, page.height - 1);
-    value = (1.0f - ty) * ((1.0f - tx) * page.rgb(x0, y0) + tx * page.rgb(x1, y0)) +
-            ty * ((1.0f - tx) * page.rgb(x0, y1) + tx * page.rgb(x1, y1));
+    const vec2 texel((uv.x * a.scaleOffset.x + a.scaleOffset.z) * float(page.width),
+                     (uv.y * a.scaleOffset.y + a.scaleOffset.w) * float(page.height));
+    sampleBilinear(page, texel, &value.x);
     return true;
   }
 
