@@ -204,22 +204,17 @@ WorkSplit splitWork(size_t count, size_t tile, const std::function<double(size_t
   WorkSplit split;
   split.count = count;
   const int ranks = distributedSize();
-  split.rankCost.assign(size_t(ranks), 0.0);
-  if (ranks == 1) {
-    split.local.resize(count);
-    for (size_t i = 0; i < count; ++i) split.local[i] = uint32_t(i);
-    for (size_t i = 0; i < count; ++i) split.rankCost[0] += cost ? cost(i) : 1.0;
-    return split;
-  }
+  if (ranks == 1) return split;  // every item local: no costs to weigh
+  std::vector<double> rankCost(size_t(ranks), 0.0);
   tile = std::max<size_t>(1, tile);
   split.owner.resize(count);
   for (size_t begin = 0; begin < count; begin += tile) {
     const size_t end = std::min(count, begin + tile);
     double c = 0.0;
     for (size_t i = begin; i < end; ++i) c += cost ? std::max(0.0, cost(i)) : 1.0;
-    const size_t r = size_t(std::min_element(split.rankCost.begin(), split.rankCost.end()) -
-                            split.rankCost.begin());
-    split.rankCost[r] += c;
+    const size_t r =
+        size_t(std::min_element(rankCost.begin(), rankCost.end()) - rankCost.begin());
+    rankCost[r] += c;
     for (size_t i = begin; i < end; ++i) split.owner[i] = int32_t(r);
     if (int(r) == distributedRank())
       for (size_t i = begin; i < end; ++i) split.local.push_back(uint32_t(i));

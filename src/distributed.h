@@ -51,12 +51,12 @@ bool distributedFailureAgreed();
 // Which items [0, count) this rank computes. Items are cut into tiles of `tile` consecutive
 // items; tiles are dealt in order, each to the rank with the least estimated cost so far
 // (ties: the lowest rank), so equal costs go round robin and neighbouring tiles (which cost
-// alike) land on different ranks. The same on every rank. Not distributed: every item local.
+// alike) land on different ranks. The same on every rank. Not distributed: every item local,
+// and `cost` is never called.
 struct WorkSplit {
   size_t count = 0;
   std::vector<int32_t> owner;  // per item; empty when not distributed
-  std::vector<uint32_t> local;  // this rank's items, ascending (all items when not distributed)
-  std::vector<double> rankCost;  // estimated cost per rank
+  std::vector<uint32_t> local;  // this rank's items, ascending; empty when not distributed
   bool distributed() const { return !owner.empty(); }
 };
 // `cost(i)`: the estimated cost of item i (any unit, >= 0); null: every item costs 1.
