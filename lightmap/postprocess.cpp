@@ -76,6 +76,17 @@ float texelLuminance(const Image& img, int x, int y) {
   return img.channels >= 3 ? luminance(vec3(p[0], p[1], p[2])) : p[0];
 }
 
+// Texel i's object on `page` (< 0: none; 0 for every texel of a page without ids), and how
+// many objects the page's ids name (at least 1): the per-object sums' sizes.
+int32_t texelObject(const LightmapPage& page, size_t i) {
+  return page.objectId.empty() ? 0 : page.objectId[i];
+}
+int32_t objectCount(const LightmapPage& page) {
+  int32_t objects = 1;
+  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
+  return objects;
+}
+
 // Squared difference of two texels summed over the colour channels (the first three).
 float colourDistance2(const Image& a, const Image& b, size_t i) {
   const int c = std::min(a.channels, 3);
@@ -303,15 +314,13 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
 void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
   const LightmapPage& page = g.page;
   const int w = page.width(), h = page.height();
-  int32_t objects = 1;
-  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
-  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  const int32_t objects = objectCount(page);
   std::vector<double> residual(size_t(objects), 0.0), expected(size_t(objects), 0.0);
   std::vector<size_t> count(size_t(objects), 0);
   for (int y = 1; y + 1 < h; ++y)
     for (int x = 1; x + 1 < w; ++x) {
       const size_t i = size_t(y) * w + x;
-      if (!page.valid[i] || objectOf(i) < 0) continue;
+      if (!page.valid[i] || texelObject(page, i) < 0) continue;
       double sum = 0.0, var = 0.0;
       int m = 0;
       g.forEachCompatible(x, y, 1, [&](size_t j) {
@@ -322,7 +331,7 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
       });
       if (m < 8) continue;
       const double d = texelLuminance(page.radiance, x, y) - sum / 8.0;
-      const size_t o = size_t(objectOf(i));
+      const size_t o = size_t(texelObject(page, i));
       residual[o] += d * d;
       expected[o] += double(sigma[i]) * sigma[i] + var / 64.0;
       ++count[o];
@@ -340,7 +349,8 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
     if (e > 0.0 && r < e) scale[o] = float(std::sqrt(r / e));
   }
   for (size_t i = 0; i < sigma.size(); ++i)
-    if (page.valid[i] && objectOf(i) >= 0) sigma[i] *= scale[size_t(objectOf(i))];
+    if (page.valid[i] && texelObject(page, i) >= 0)
+      sigma[i] *= scale[size_t(texelObject(page, i))];
 }
 
 // Scales each object's valid texels, per channel, so that their sum is the raw sum again:
@@ -348,22 +358,22 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
 // A factor > 0 keeps every texel non-negative and keeps texels > 0 above 0.
 void restoreObjectSums(LightmapPage& page, const Image& raw) {
   const int c = page.radiance.channels;
-  int32_t objects = 1;
-  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
-  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  const int32_t objects = objectCount(page);
   std::vector<double> rawSum(size_t(objects) * c, 0.0), outSum(size_t(objects) * c, 0.0);
   for (size_t i = 0; i < page.texelCount(); ++i) {
-    if (!page.valid[i] || objectOf(i) < 0) continue;
+    const int32_t object = texelObject(page, i);
+    if (!page.valid[i] || object < 0) continue;
     for (int ch = 0; ch < c; ++ch) {
-      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(object) * c + size_t(ch);
       rawSum[o] += raw.pixels[k];
       outSum[o] += page.radiance.pixels[k];
     }
   }
   for (size_t i = 0; i < page.texelCount(); ++i) {
-    if (!page.valid[i] || objectOf(i) < 0) continue;
+    const int32_t object = texelObject(page, i);
+    if (!page.valid[i] || object < 0) continue;
     for (int ch = 0; ch < c; ++ch) {
-      const size_t k = i * size_t(c) + size_t(ch), o = size_t(objectOf(i)) * c + size_t(ch);
+      const size_t k = i * size_t(c) + size_t(ch), o = size_t(object) * c + size_t(ch);
       if (outSum[o] > 0.0)
         page.radiance.pixels[k] = float(double(page.radiance.pixels[k]) * rawSum[o] / outSum[o]);
     }
@@ -688,33 +698,33 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   // and d = out - x differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test
   // is on the error of this bake, not its expectation.
   const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
-  int32_t objects = 1;
-  for (int32_t id : page.objectId) objects = std::max(objects, id + 1);
-  const auto objectOf = [&](size_t i) { return page.objectId.empty() ? 0 : page.objectId[i]; };
+  const int32_t objects = objectCount(page);
   std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);
   std::vector<double> noise(size_t(objects), 0.0), light(size_t(objects), 0.0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const size_t i = size_t(y) * w + x;
-      if (!page.valid[i] || objectOf(i) < 0) continue;
+      const int32_t object = texelObject(page, i);
+      if (!page.valid[i] || object < 0) continue;
+      const size_t o = size_t(object);
       const float* out = page.radiance.pixels.data() + i * size_t(c);
       const float* raw = input.pixels.data() + i * size_t(c);
       const double var = double(checked[i]) * checked[i];
       const double t = colourDistance2(page.radiance, input, i) +
                        2.0 * var * colourVarianceFactor(page.radiance, i) * (double(div[i]) - 1.0);
       // 4 var_c d_c^2: the variance of 2 e d, the part of the realised gain SURE averages.
-      const float l = c >= 3 ? luminance(vec3(out[0], out[1], out[2])) : out[0];
+      const float l = texelLuminance(page.radiance, x, y);
       double realised = 0.0;
       for (int ch = 0; ch < std::min(c, 3); ++ch) {
         const double share = l > 0.0f ? double(out[ch]) / l : 1.0;
         const double d = double(out[ch]) - raw[ch];
         realised += 4.0 * var * share * share * d * d;
       }
-      excess[size_t(objectOf(i))] += t;
-      spread[size_t(objectOf(i))] += t * t + realised;
+      excess[o] += t;
+      spread[o] += t * t + realised;
       const double lr = texelLuminance(input, x, y);
-      noise[size_t(objectOf(i))] += var;
-      light[size_t(objectOf(i))] += lr * lr;
+      noise[o] += var;
+      light[o] += lr * lr;
     }
   // The margin: kObjectMargin for a noisy object, rising to kConvergedMargin as its
   // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged.
@@ -724,11 +734,14 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
     const double u = std::clamp((kNoisy - relative) / (kNoisy - kConverged), 0.0, 1.0);
     margin[o] = kObjectMargin + u * (kConvergedMargin - kObjectMargin);
   }
-  for (size_t i = 0; i < n; ++i)
-    if (page.valid[i] && objectOf(i) >= 0 &&
-        excess[size_t(objectOf(i))] >= -margin[size_t(objectOf(i))] * std::sqrt(spread[size_t(objectOf(i))]))
+  for (size_t i = 0; i < n; ++i) {
+    const int32_t object = texelObject(page, i);
+    if (!page.valid[i] || object < 0) continue;
+    const size_t o = size_t(object);
+    if (excess[o] >= -margin[o] * std::sqrt(spread[o]))
       for (int ch = 0; ch < c; ++ch)
         page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
+  }
   restoreObjectSums(page, input);
 }
 
