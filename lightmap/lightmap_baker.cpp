@@ -1002,8 +1002,8 @@ class LightmapBounceCache final : public BounceCache {
 // light as a bounce sees it (IntegratorSettings::bounceView, one bounce fewer, no
 // indirectIntensity), from `samples` full paths on its own stream, post-processed like the
 // light pages (invalid texels filled, dilated, stitched; not denoised, see below) so that a
-// read anywhere on a visible surface finds the light there. `validity` receives each texel's validity from
-// this pass (per page, W x H). Returns null when cancelled.
+// read anywhere on a visible surface finds the light there. `validity` receives each
+// texel's validity from this pass (per page, W x H). Returns null when cancelled.
 std::unique_ptr<LightmapBounceCache> bounceCachePass(
     std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels, const Scene& scene,
     const AtlasLayout& layout, const Tracer& tracer, IntegratorSettings is,

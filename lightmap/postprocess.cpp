@@ -693,10 +693,11 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   // result is not better than the raw texels (a converged object where choosing the blend
   // from noisy local estimates costs more than the filter gains), the object keeps its raw
   // texels. The object keeps the filter only when the estimated gain exceeds a margin
-  // (kObjectMargin to kConvergedMargin by the object's relative noise) times its spread: the per-texel terms' own spread (sqrt of the sum of their squares),
-  // and the spread of the realised gain about what SURE estimates, which with raw error e
-  // and d = out - x differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test
-  // is on the error of this bake, not its expectation.
+  // (kObjectMargin to kConvergedMargin by the object's relative noise) times its spread:
+  // the per-texel terms' own spread (sqrt of the sum of their squares), and the spread of
+  // the realised gain about what SURE estimates, which with raw error e and d = out - x
+  // differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test is on the error of
+  // this bake, not its expectation.
   const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
   const int32_t objects = objectCount(page);
   std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);

@@ -570,12 +570,12 @@ TEST(LightmapBake, AdaptiveSamplingSpendsPathsWherePathsDisagree) {
 }
 
 // Neyman allocation from the bounce cache's first pass (settings.adaptiveSamples): the same
-// block foot under a constant sky (2 bounces, so that there is a cache), where paths disagree most at the foot (column 8) and
-// least 1 m from it (column 0); the texels under the block (invalid) take the least. The
-// mean over the texels stays samplesPerTexel (the counts
-// are scaled to it; rounding moves it by < 1), the foot gets more than the far side, no
-// texel leaves [samplesPerTexel / 2, 8 x samplesPerTexel], and the result is bit-identical
-// at 1 and 2 threads.
+// block foot under a constant sky (2 bounces, so that there is a cache), where paths
+// disagree most at the foot (column 8) and least 1 m from it (column 0); the texels under
+// the block (invalid) take the least. The mean over the texels stays samplesPerTexel (the
+// counts are scaled to it; rounding moves it by < 1), the foot gets more than the far side,
+// no texel leaves [samplesPerTexel / 2, 8 x samplesPerTexel], and the result is
+// bit-identical at 1 and 2 threads.
 TEST(LightmapBake, AdaptiveAllocationFromTheBounceCacheKeepsTheMeanCount) {
   LightmapBakeSettings s = smallSettings();
   s.samplesPerTexel = 64;
