@@ -525,11 +525,11 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
 // ---- dimension 3: interleaved walks (the batch forms) --------------------------------------
 //
 // A walk through a large set misses the cache at nearly every step (the grid's seed, then each
-// record: a 100k-probe set's records fill 42 MB), and a single walk cannot overlap those
-// misses, since each step's address comes from the step before. The batch forms advance up to
-// kInterleavedWalks points' walks in turn instead: each walk's next record is prefetched when
-// its step is decided and read a round later, by which time the other walks' steps have hidden
-// most of its latency. Only fast steps between inner cells are taken here; any other step
+// record and its neighbours: a 100k-probe set's records fill 42 MB), and a single walk cannot
+// overlap those misses, since each step's address comes from the step before. The batch forms
+// advance up to kInterleavedWalks points' walks in turn instead: each walk's next lines are
+// prefetched when its step is decided and read a round later, by which time the other walks'
+// steps have hidden most of their latency. Only fast steps between inner cells are taken here; any other step
 // (near a face, an outer cell, the hull) finishes that point with locate3 from the cell its
 // walk has reached, which is the same walk's continuation. So each point gets locateProbe's
 // cell, weights and steps (steps may differ only on a walk that reaches the step cap).
