@@ -297,7 +297,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
   // then faces are matched instead), the hull faces (no tetrahedron beyond) and the walk
-  // records, whose links across the hull are set with the outer cells below.
+  // records.
   auto face = [&](int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
@@ -346,7 +346,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       }
       s.neighbours.push_back(links);
       makeProbeWalkCell({P[size_t(t[0])], P[size_t(t[1])], P[size_t(t[2])], P[size_t(t[3])]},
-                        links, s.walk.emplace_back());
+                        s.walk.emplace_back());
     }
   } else {
     for (int32_t i = 0; i < inner; ++i) {
@@ -389,7 +389,6 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
             [](const Outer& a, const Outer& b) { return a.v < b.v; });
 
   s.innerCellCount = inner;
-  const bool linkWalk = s.walk.size() == size_t(inner);
   std::vector<FaceRef> edges;
   for (size_t i = 0; i < outers.size(); ++i) {
     const int32_t c = inner + int32_t(i);
@@ -397,7 +396,6 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     s.cells.push_back(glm::ivec4(o.v[0], o.v[1], o.v[2], -1));
     s.neighbours.push_back(glm::ivec4(-1, -1, -1, o.tet));
     s.neighbours[size_t(o.tet)][o.slot] = c;
-    if (linkWalk) s.walk[size_t(o.tet)].next[o.slot] = c;
     for (int k = 0; k < 3; ++k) {
       int32_t a = o.v[(k + 1) % 3], b = o.v[(k + 2) % 3];
       if (a > b) std::swap(a, b);

@@ -393,8 +393,9 @@ TEST(ProbeLookup, ManyThreadsGetTheSameAnswers) {
 // The fast walk (float barycentrics, exact predicates near faces) against the exact walk
 // from the same start, on 1M points inside and outside the hull: the same cell every time,
 // and weights that differ by no more than the float error bound of the fast path (8 u S_k,
-// S_k = sum_j |rows[k][j]| |p_j - origin_j|, with l_0 carrying the sum of the others'
-// bounds; see probe_runtime.cpp). The queries mix jumps (no hint), small moves (hinted),
+// S_k = sum_j |g_kj| |p_j - origin_j| with g_k = ProbeWalkCell::gradient(k) for k = 1..3,
+// and l_0 held to the sum of the others' bounds, which covers its own since S_0 <= S_1 + S_2
+// + S_3; see probe_runtime.cpp). The queries mix jumps (no hint), small moves (hinted),
 // probe positions exactly (three coordinates exactly 0, computed with rounding: only the
 // exact predicates can decide) and float midpoints of a cell's edges (within rounding of
 // two faces). Two sets: random probes in a cube, and a rotated grid (cospherical).
@@ -444,7 +445,7 @@ void expectFastMatchesExact(const ProbeSet& s, int count, uint32_t seed) {
       const ProbeWalkCell& w = s.walk[size_t(fast.cell)];
       const glm::dvec3 q = glm::abs(glm::dvec3(p) - glm::dvec3(w.origin));
       for (int k = 0; k < 3; ++k) {
-        const double sk = glm::dot(glm::abs(glm::dvec3(w.rows[size_t(k)])), q);
+        const double sk = glm::dot(glm::abs(glm::dvec3(w.gradient(k + 1))), q);
         bound[k + 1] = 8.0 * kU * sk + 4.0 * kU;
         bound[0] += bound[k + 1];
       }

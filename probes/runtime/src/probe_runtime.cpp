@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #if defined(__SSE2__)
@@ -306,29 +307,38 @@ void scan3(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc) {
 
 // ---- dimension 3: the float fast path ----------------------------------------------------
 //
-// A step computes p's barycentric coordinates l_k in float from the cell's record
-// (ProbeWalkCell) and trusts a sign only beyond an error bound e_k; when the bound leaves the
-// decision open (p within about 1e-6 relative of a face, or a sliver) the step is made with
-// the exact predicates instead (evalTet). Derivation of e_k (u = 2^-24, float rounding):
-// prepareProbeLookup makes each entry of rows[] accurate to 1.07 u relative (walkRows); the
-// difference q = p - origin rounds once (u relative per component); the 3-term dot product
-// rounds within 3 u x sum_j |r_kj q_j|, with or without FMA. So for k = 1, 2, 3
-//   |l_k - lambda_k| <= 5.1 u S_k,   S_k = sum_j |r_kj| |q_j|,
-// and l_0 = ((1 - l_1) - l_2) - l_3 adds its three roundings, 3 u (1 + sum |l_k|), to the
-// sum of the others' errors. kFastError = 8 u covers 5.1 u with the rounding of S itself;
-// kTiny covers products that underflow. A step then decides:
-//  - inside: every l_k > e_k, so every exact coordinate is positive: the exact walk stops
-//    here too;
-//  - exit: the smallest l_k is below -e_k and below every other l_j by more than both error
-//    bounds, so it is the exact walk's most negative coordinate and the same face is left
-//    (the exact walk ranks its double determinants, accurate to about 1e-15 of their
-//    permanent: far inside that margin);
-//  - otherwise (and for NaN): evalTet, the exact walk's own step.
+// A step computes p's barycentric coordinates in float from the cell's record (ProbeWalkCell):
+// l_k = c_k + g_k . q with q = p - origin, g_k lane k's gradient and c = (1, 0, 0, 0). It
+// trusts a sign only beyond an error bound; when no bound settles the step (p within about
+// 1e-6 relative of a face, or a sliver) the step is made with the exact predicates instead
+// (evalTet). The error of l_k (u = 2^-24, float rounding): walkRecord makes each gradient
+// entry accurate to 1.07 u relative; q rounds once (u relative per component); the 3-term dot
+// product rounds within 3 u x sum_j |g_kj q_j|, with or without FMA; lane 0's addition of 1
+// rounds within u |l_0| <= u (1 + S_0) (1 + 6 u). So, with S_k = sum_j |g_kj| |q_j|,
+//   |l_k - lambda_k| <= 5.1 u S_k for k = 1, 2, 3, and 6.2 u S_0 + 1.01 u for k = 0.
+// Two bounds rest on this.
+//  - The record's `inside` settles the common case, a point inside its cell, with one compare:
+//    every l_k > inside proves every lambda_k > 0. Proof: q = sum_m lambda_m e_m (e_m = v_m -
+//    v0), so S_k <= Lambda T_k with T_k = sum_j |g_kj| D_j, D_j = sum_m |e_mj| and Lambda =
+//    max_m |lambda_m|. Every l_k > 0 gives lambda_k > -err_k, and as the lambdas sum to 1,
+//    Lambda <= 1 + sum_k err_k. walkRecord sets `inside` only where u sum_k T_k <= 2^-10 (else
+//    infinity), which gives Lambda < 1.007 and err_k < 6.3 u T_k + 1.01 u; inside = 8 u max_k
+//    T_k + 4 u + kTiny exceeds that, so l_k > inside implies lambda_k > 0.
+//  - Otherwise the bound is computed from q: e_k = kFastError S_k + kTiny (+ 2 u in lane 0,
+//    which also covers its kTiny). kFastError = 8 u covers 5.1 u (6.2 u in lane 0) with the
+//    rounding of S itself; kTiny covers products that underflow. A step then decides:
+//    - inside: every l_k > e_k, so every exact coordinate is positive: the exact walk stops
+//      here too;
+//    - exit: the smallest l_k is below -e_k and below every other l_j by more than both error
+//      bounds, so it is the exact walk's most negative coordinate and the same face is left
+//      (the exact walk ranks its double determinants, accurate to about 1e-15 of their
+//      permanent: far inside that margin);
+//    - otherwise (and for NaN): evalTet, the exact walk's own step.
 // The fast walk thus visits the exact walk's cells and stops in the exact walk's cell; its
-// weights are the float coordinates (within 8 u S_k of the exact ones).
+// weights are the float coordinates (within e_k of the exact ones).
 constexpr float kUnitRoundoff = 5.9604645e-8f;  // 2^-24
 constexpr float kFastError = 8.0f * kUnitRoundoff;
-constexpr float kRoundError = 4.0f * kUnitRoundoff;  // l_0's 3 roundings, with margin
+constexpr float kLaneZeroError = 2.0f * kUnitRoundoff;  // l_0's final addition of 1
 constexpr float kTiny = 1.2e-38f;
 
 // The decision from the coordinates l and their error bounds e (see above).
@@ -347,99 +357,127 @@ inline int fastDecision(const float l[4], const float e[4]) {
 }
 
 #if defined(__SSE2__)
-// The three rows' dot products and bounds side by side in one SSE register each (lanes 1..3,
-// lane 0 then takes l_0 and e_0), each lane with the scalar form's operations in its order:
-// bit for bit the same coordinates and bounds, in about a third of the instructions. The record
-// is 64-byte aligned (ProbeWalkCell), so it is three aligned loads.
-struct FastCoordinates {
-  __m128 l, e;  // lanes 0..3: l_0..l_3 and e_0..e_3
-};
+// The four coordinates (and q, and the bounds) side by side in one SSE register: lane k is
+// l_k. The record is 64-byte aligned (ProbeWalkCell), so every load is aligned.
+using Lanes = __m128;
 
-inline FastCoordinates fastCoordinates(const ProbeWalkCell& w, glm::vec3 p) {
-  const float* r = &w.origin.x;
-  const __m128 a = _mm_load_ps(r);       // ox oy oz r0x
-  const __m128 b = _mm_load_ps(r + 4);   // r0y r0z r1x r1y
-  const __m128 c = _mm_load_ps(r + 8);   // r1z r2x r2y r2z
-  // Columns with row k in lane k + 1 (lane 0 repeats row 0: finite, discarded).
-  const __m128 x = _mm_shuffle_ps(a, _mm_shuffle_ps(b, c, _MM_SHUFFLE(1, 1, 2, 2)),
-                                  _MM_SHUFFLE(2, 0, 3, 3));
-  const __m128 yt = _mm_shuffle_ps(b, c, _MM_SHUFFLE(2, 2, 3, 0));
-  const __m128 y = _mm_shuffle_ps(yt, yt, _MM_SHUFFLE(2, 1, 0, 0));
-  const __m128 z = _mm_shuffle_ps(b, c, _MM_SHUFFLE(3, 0, 1, 1));
-  const __m128 qv = _mm_sub_ps(_mm_setr_ps(p.x, p.y, p.z, 0.0f), a);
+inline Lanes pointLanes(glm::vec3 p) { return _mm_setr_ps(p.x, p.y, p.z, 0.0f); }
+inline glm::vec3 toPoint(Lanes p) {
+  alignas(16) float a[4];
+  _mm_store_ps(a, p);
+  return {a[0], a[1], a[2]};
+}
+
+inline Lanes fastQ(const ProbeWalkCell& w, Lanes p) {
+  return _mm_sub_ps(p, _mm_load_ps(&w.origin.x));
+}
+
+// l_k = (x[k] q.x + y[k] q.y) + z[k] q.z, then l_0 + 1.
+inline Lanes fastCoordinates(const ProbeWalkCell& w, Lanes q) {
+  const __m128 qx = _mm_shuffle_ps(q, q, _MM_SHUFFLE(0, 0, 0, 0)),
+               qy = _mm_shuffle_ps(q, q, _MM_SHUFFLE(1, 1, 1, 1)),
+               qz = _mm_shuffle_ps(q, q, _MM_SHUFFLE(2, 2, 2, 2));
+  const __m128 l = _mm_add_ps(
+      _mm_add_ps(_mm_mul_ps(_mm_load_ps(w.x.data()), qx), _mm_mul_ps(_mm_load_ps(w.y.data()), qy)),
+      _mm_mul_ps(_mm_load_ps(w.z.data()), qz));
+  return _mm_add_ss(l, _mm_set_ss(1.0f));
+}
+
+// Every l_k > w.inside (false for NaN).
+inline bool fastInside(const ProbeWalkCell& w, Lanes l) {
+  return _mm_movemask_ps(_mm_cmpgt_ps(l, _mm_set1_ps(w.inside))) == 0xF;
+}
+
+// The step's decision from bounds computed from q, for when w.inside does not settle it:
+// -1 (inside), 0..3 (the face to leave by) or -2 (undecided).
+inline int boundedDecision(const ProbeWalkCell& w, Lanes q, Lanes l) {
   const __m128 sign = _mm_set1_ps(-0.0f);
-  const __m128 av = _mm_andnot_ps(sign, qv);
-  const __m128 qx = _mm_shuffle_ps(qv, qv, _MM_SHUFFLE(0, 0, 0, 0)),
-               qy = _mm_shuffle_ps(qv, qv, _MM_SHUFFLE(1, 1, 1, 1)),
-               qz = _mm_shuffle_ps(qv, qv, _MM_SHUFFLE(2, 2, 2, 2));
-  const __m128 ax = _mm_shuffle_ps(av, av, _MM_SHUFFLE(0, 0, 0, 0)),
-               ay = _mm_shuffle_ps(av, av, _MM_SHUFFLE(1, 1, 1, 1)),
-               az = _mm_shuffle_ps(av, av, _MM_SHUFFLE(2, 2, 2, 2));
-  // l_k = r.x qx + r.y qy + r.z qz; e_k = kFastError (|r.x| ax + |r.y| ay + |r.z| az) + kTiny.
-  const __m128 l = _mm_add_ps(_mm_add_ps(_mm_mul_ps(x, qx), _mm_mul_ps(y, qy)), _mm_mul_ps(z, qz));
-  const __m128 s = _mm_add_ps(
-      _mm_add_ps(_mm_mul_ps(_mm_andnot_ps(sign, x), ax), _mm_mul_ps(_mm_andnot_ps(sign, y), ay)),
-      _mm_mul_ps(_mm_andnot_ps(sign, z), az));
-  const __m128 e = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(kFastError), s), _mm_set1_ps(kTiny));
-  // l_0 = ((1 - l_1) - l_2) - l_3; e_0 = (e_1 + e_2 + e_3) + kRoundError (1 + |l_1| + ...).
-  const __m128 l2 = _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 2, 2, 2)),
-               l3 = _mm_shuffle_ps(l, l, _MM_SHUFFLE(3, 3, 3, 3));
-  const __m128 l1 = _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 1, 1, 1));
-  const __m128 l0 = _mm_sub_ss(_mm_sub_ss(_mm_sub_ss(_mm_set_ss(1.0f), l1), l2), l3);
-  const __m128 e2 = _mm_shuffle_ps(e, e, _MM_SHUFFLE(2, 2, 2, 2)),
-               e3 = _mm_shuffle_ps(e, e, _MM_SHUFFLE(3, 3, 3, 3));
-  const __m128 e1 = _mm_shuffle_ps(e, e, _MM_SHUFFLE(1, 1, 1, 1));
-  const __m128 al = _mm_andnot_ps(sign, l);
-  const __m128 al2 = _mm_shuffle_ps(al, al, _MM_SHUFFLE(2, 2, 2, 2)),
-               al3 = _mm_shuffle_ps(al, al, _MM_SHUFFLE(3, 3, 3, 3));
-  const __m128 al1 = _mm_shuffle_ps(al, al, _MM_SHUFFLE(1, 1, 1, 1));
-  const __m128 round = _mm_add_ss(_mm_add_ss(_mm_add_ss(_mm_set_ss(1.0f), al1), al2), al3);
-  const __m128 e0 = _mm_add_ss(_mm_add_ss(_mm_add_ss(e1, e2), e3),
-                               _mm_mul_ss(_mm_set_ss(kRoundError), round));
-  return {_mm_move_ss(l, l0), _mm_move_ss(e, e0)};
+  const __m128 a = _mm_andnot_ps(sign, q);
+  const __m128 ax = _mm_shuffle_ps(a, a, _MM_SHUFFLE(0, 0, 0, 0)),
+               ay = _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 1, 1, 1)),
+               az = _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 2, 2, 2));
+  const __m128 s =
+      _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_andnot_ps(sign, _mm_load_ps(w.x.data())), ax),
+                            _mm_mul_ps(_mm_andnot_ps(sign, _mm_load_ps(w.y.data())), ay)),
+                 _mm_mul_ps(_mm_andnot_ps(sign, _mm_load_ps(w.z.data())), az));
+  const __m128 e = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(kFastError), s),
+                              _mm_setr_ps(kLaneZeroError, kTiny, kTiny, kTiny));
+  if (_mm_movemask_ps(_mm_cmpgt_ps(l, e)) == 0xF) return -1;
+  float lf[4], ef[4];
+  _mm_storeu_ps(lf, l);
+  _mm_storeu_ps(ef, e);
+  return fastDecision(lf, ef);
 }
 
-// Every lane inside: l_k > e_k (false for NaN).
-inline bool fastInside(const FastCoordinates& c) {
-  return _mm_movemask_ps(_mm_cmpgt_ps(c.l, c.e)) == 0xF;
-}
-
-// Returns -1 (inside, l = the coordinates), 0..3 (the face to leave by) or -2 (undecided).
-inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
-  const FastCoordinates c = fastCoordinates(w, p);
-  _mm_storeu_ps(l, c.l);
-  if (fastInside(c)) return -1;
-  float e[4];
-  _mm_storeu_ps(e, c.e);
-  return fastDecision(l, e);
+// The weights from coordinates that passed an inside test: l_1..l_3, and l_0 replaced by
+// max(((1 - l_1) - l_2) - l_3, 0), which makes the four sum to 1 within three roundings
+// (lane 0's own value is within its error bound of lambda_0 but sums with the others only to
+// within theirs, up to 1e-5 in a thin cell); the clamp keeps a weight that rounding took
+// below 0 (lambda_0 is positive) at 0.
+inline std::array<float, 4> fastWeights(Lanes l) {
+  const __m128 l0 = _mm_sub_ss(
+      _mm_sub_ss(_mm_sub_ss(_mm_set_ss(1.0f), _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 1, 1, 1))),
+                 _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 2, 2, 2))),
+      _mm_shuffle_ps(l, l, _MM_SHUFFLE(3, 3, 3, 3)));
+  std::array<float, 4> a;
+  _mm_storeu_ps(a.data(), _mm_move_ss(l, _mm_max_ss(l0, _mm_setzero_ps())));
+  return a;
 }
 #else
-// Returns -1 (inside, l = the coordinates), 0..3 (the face to leave by) or -2 (undecided).
-inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, float l[4]) {
-  const float qx = p.x - w.origin.x, qy = p.y - w.origin.y, qz = p.z - w.origin.z;
-  const float ax = std::fabs(qx), ay = std::fabs(qy), az = std::fabs(qz);
+// The same lanes one by one, each with the SSE form's operations in its order.
+using Lanes = std::array<float, 4>;
+
+inline Lanes pointLanes(glm::vec3 p) { return {p.x, p.y, p.z, 0.0f}; }
+inline glm::vec3 toPoint(Lanes p) { return {p[0], p[1], p[2]}; }
+
+inline Lanes fastQ(const ProbeWalkCell& w, Lanes p) {
+  return {p[0] - w.origin.x, p[1] - w.origin.y, p[2] - w.origin.z, 0.0f};
+}
+
+inline Lanes fastCoordinates(const ProbeWalkCell& w, Lanes q) {
+  Lanes l;
+  for (size_t k = 0; k < 4; ++k) l[k] = (w.x[k] * q[0] + w.y[k] * q[1]) + w.z[k] * q[2];
+  l[0] += 1.0f;
+  return l;
+}
+
+inline bool fastInside(const ProbeWalkCell& w, Lanes l) {
+  return l[0] > w.inside && l[1] > w.inside && l[2] > w.inside && l[3] > w.inside;
+}
+
+inline int boundedDecision(const ProbeWalkCell& w, Lanes q, Lanes l) {
+  const float ax = std::fabs(q[0]), ay = std::fabs(q[1]), az = std::fabs(q[2]);
   float e[4];
-  for (int k = 0; k < 3; ++k) {
-    const glm::vec3 r = w.rows[size_t(k)];
-    l[k + 1] = r.x * qx + r.y * qy + r.z * qz;
-    e[k + 1] = kFastError * (std::fabs(r.x) * ax + std::fabs(r.y) * ay + std::fabs(r.z) * az) +
-               kTiny;
+  for (size_t k = 0; k < 4; ++k) {
+    const float s = (std::fabs(w.x[k]) * ax + std::fabs(w.y[k]) * ay) + std::fabs(w.z[k]) * az;
+    e[k] = kFastError * s + (k == 0 ? kLaneZeroError : kTiny);
   }
-  l[0] = ((1.0f - l[1]) - l[2]) - l[3];
-  e[0] = (e[1] + e[2] + e[3]) +
-         kRoundError * (1.0f + std::fabs(l[1]) + std::fabs(l[2]) + std::fabs(l[3]));
-  return fastDecision(l, e);
+  return fastDecision(l.data(), e);
+}
+
+inline std::array<float, 4> fastWeights(Lanes l) {
+  return {std::max(((1.0f - l[1]) - l[2]) - l[3], 0.0f), l[1], l[2], l[3]};
 }
 #endif
 
-// finish()'s work for a fast step that ended inside (every l_k finite and positive). The
-// coordinates need no normalising: l_0 = ((1 - l_1) - l_2) - l_3 makes their sum 1 within
-// three roundings (each l_k < 1 inside), as close as dividing by the sum would.
-inline void setFast(const ProbeSet& s, ProbeLocation& loc, int32_t cell, const float l[4]) {
-  const glm::ivec4 t = s.cells[size_t(cell)];
-  loc.cell = cell;
-  loc.probes = {t[0], t[1], t[2], t[3]};
-  loc.barycentric = {l[0], l[1], l[2], l[3]};
+// Returns -1 (inside, l = the coordinates), 0..3 (the face to leave by) or -2 (undecided).
+inline int fastStep(const ProbeWalkCell& w, glm::vec3 p, Lanes& l) {
+  const Lanes q = fastQ(w, pointLanes(p));
+  l = fastCoordinates(w, q);
+  if (fastInside(w, l)) return -1;
+  return boundedDecision(w, q, l);
+}
+
+// The location a fast step that ended inside gives (every l_k finite and positive). The
+// weights need no normalising: they sum to 1 within three roundings (fastWeights), as close as
+// dividing by their sum would make them.
+// Each array is copied whole (the compiler otherwise rebuilds the probes from scalars).
+inline ProbeLocation fastLocation(const ProbeSet& s, int32_t cell, Lanes l, uint16_t steps) {
+  ProbeLocation loc{cell, {}, {}, {}, steps, false};
+  std::memcpy(loc.probes.data(), &s.cells[size_t(cell)], sizeof(loc.probes));
+  loc.barycentric = fastWeights(l);
+  loc.weights = loc.barycentric;
+  return loc;
 }
 
 // The walk: with `walk` (the set's records) each step tries fastStep first; without, every
@@ -449,14 +487,16 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
              const ProbeWalkCell* walk, int firstStep = 0) {
   for (int step = firstStep; step < kMaxWalkSteps; ++step) {
     loc.steps = uint16_t(std::min(step + 1, 65535));
-    int32_t next;
     if (cell < s.innerCellCount) {
       int exit = -2;
       if (walk) {
-        float l[4];
+        // The neighbours' line is read only after the step's decision: ask for it now, so
+        // that a miss there overlaps the record's.
+        prefetch(&s.neighbours[size_t(cell)]);
+        Lanes l;
         exit = fastStep(walk[cell], p, l);
         if (exit == -1) {
-          setFast(s, loc, cell, l);
+          loc = fastLocation(s, cell, l, loc.steps);
           return;
         }
       }
@@ -468,17 +508,16 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
           return;
         }
       }
-      next = walk ? walk[cell].next[exit] : s.neighbours[cell][exit];
+      cell = s.neighbours[cell][exit];
     } else {
       const OuterEval e = evalOuter(s, cell, p);
       if (e.exit < 0) {
         setOuter(s, loc, cell, e.w);
         return;
       }
-      next = s.neighbours[cell][e.exit];
+      cell = s.neighbours[cell][e.exit];
     }
-    if (next < 0) break;
-    cell = next;
+    if (cell < 0) break;
   }
   scan3(s, p, loc);
 }
@@ -486,11 +525,11 @@ void locate3(const ProbeSet& s, glm::vec3 p, int32_t cell, ProbeLocation& loc,
 // ---- dimension 3: interleaved walks (the batch forms) --------------------------------------
 //
 // A walk through a large set misses the cache at nearly every step (the grid's seed, then each
-// record: a 100k-probe set's records fill 42 MB), and a single walk cannot overlap those
-// misses, since each step's address comes from the step before. The batch forms advance up to
-// kInterleavedWalks points' walks in turn instead: each walk's next record is prefetched when
-// its step is decided and read a round later, by which time the other walks' steps have hidden
-// most of its latency. Only fast steps between inner cells are taken here; any other step
+// record and its neighbours: a 100k-probe set's records fill 42 MB), and a single walk cannot
+// overlap those misses, since each step's address comes from the step before. The batch forms
+// advance up to kInterleavedWalks points' walks in turn instead: each walk's next lines are
+// prefetched when its step is decided and read a round later, by which time the other walks'
+// steps have hidden most of their latency. Only fast steps between inner cells are taken here; any other step
 // (near a face, an outer cell, the hull) finishes that point with locate3 from the cell its
 // walk has reached, which is the same walk's continuation. So each point gets locateProbe's
 // cell, weights and steps (steps may differ only on a walk that reaches the step cap).
@@ -512,8 +551,10 @@ void locateInterleaved(const ProbeSet& s, std::span<const glm::vec3> points,
   const ProbeWalkCell* walk = s.walk.data();
   const int32_t inner = s.innerCellCount;
   size_t nextPoint = 0;
+  // A step reads the record, then the neighbours (to leave) or the cell's probes (to stop).
   auto fetch = [&](int32_t cell) {
     if (cell < inner) prefetch(&walk[cell]);
+    prefetch(&s.neighbours[size_t(cell)]);
     prefetch(&s.cells[size_t(cell)]);
   };
   auto start = [&](InterleavedWalk& w) {
@@ -548,14 +589,13 @@ void locateInterleaved(const ProbeSet& s, std::span<const glm::vec3> points,
       ProbeLocation loc;
       bool found = false;
       if (w.cell < inner && w.visited < kMaxWalkSteps) {
-        float l[4];
+        Lanes l;
         const int exit = fastStep(walk[w.cell], w.p, l);
         if (exit == -1) {
-          setFast(s, loc, w.cell, l);
-          loc.steps = uint16_t(w.visited + 1);
+          loc = fastLocation(s, w.cell, l, uint16_t(w.visited + 1));
           found = true;
         } else if (exit >= 0) {
-          const int32_t next = walk[w.cell].next[exit];
+          const int32_t next = s.neighbours[size_t(w.cell)][exit];
           if (next >= 0 && next < inner) {
             w.cell = next;
             ++w.visited;
@@ -751,23 +791,30 @@ ProbeLocation locate(const ProbeSet& s, glm::vec3 p, int32_t hint,
   return loc;
 }
 
-// A cell's walk rows; false when the float map cannot be made accurate to 1.07 u per entry.
-// The edges are float differences, exact in double unless the coordinates' exponents differ
-// by more than 29 (checked); each row is a cross product of two edges over the determinant:
-// the cross products accurate to 2^-49 relative, the determinant to u / 16 (checked with its
-// error bound: a sliver fails), then one rounding to float (u).
-bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
-  dvec3 e[3];
-  for (int j = 0; j < 3; ++j) {
-    for (int a = 0; a < 3; ++a) {
-      const double x = double(v[j + 1][a]), y = double(v[0][a]);
-      const double d = x - y;
-      // Two-sum error of x - y: zero iff the difference is exact.
-      const double bv = d - x, av = d - bv;
+// A cell's walk record (gradients and `inside`); false when the float map cannot be made
+// accurate to 1.07 u per entry. The edges are float differences, exact in double unless the
+// coordinates' exponents differ by more than 29 (checked); each gradient is a cross product of
+// two edges over the determinant: the cross products accurate to 2^-49 relative, the
+// determinant to u / 16 (checked with its error bound: a sliver fails), then one rounding to
+// float (u).
+bool walkRecord(const glm::vec3 v[4], ProbeWalkCell& w) {
+  // b - a in double, false unless exact (two-sum error zero).
+  auto difference = [](glm::vec3 b, glm::vec3 a, dvec3& d) {
+    for (int i = 0; i < 3; ++i) {
+      const double x = double(b[i]), y = double(a[i]);
+      d[i] = x - y;
+      const double bv = d[i] - x, av = d[i] - bv;
       if ((x - av) + (-y - bv) != 0.0) return false;
-      e[j][a] = d;
     }
+    return true;
+  };
+  // The edges from v0 (lanes 1..3 are the rows of their matrix's inverse) and two edges of
+  // the face opposite v0 (lane 0).
+  dvec3 e[3], f[2];
+  for (int j = 0; j < 3; ++j) {
+    if (!difference(v[j + 1], v[0], e[j])) return false;
   }
+  if (!difference(v[2], v[1], f[0]) || !difference(v[3], v[1], f[1])) return false;
   // a b - c d and a bound on its error: plain double (within 2^-53 (|a b| + |c d|)) unless it
   // cancels below 1/8 of that, where Kahan's FMA algorithm (1.5 ulp) takes over. Either way
   // each component is accurate to 2^-49 relative.
@@ -781,54 +828,91 @@ bool walkRows(const glm::vec3 v[4], std::array<glm::vec3, 3>& rows) {
     const double kahan = std::fma(a, b, -cd) + std::fma(-c, d, cd);
     return Value{kahan, 0x1p-51 * std::fabs(kahan)};
   };
-  dvec3 c[3], error[3];
-  for (int k = 0; k < 3; ++k) {
-    const dvec3 a = e[(k + 1) % 3], b = e[(k + 2) % 3];
+  auto cross = [&](dvec3 a, dvec3 b, dvec3& error) {
     const Value x = diff(a.y, b.z, a.z, b.y), y = diff(a.z, b.x, a.x, b.z),
                 z = diff(a.x, b.y, a.y, b.x);
-    c[k] = dvec3(x.v, y.v, z.v);
-    error[k] = dvec3(x.error, y.error, z.error);
-  }
-  // det = e_0 . c_0 within the components' errors plus the dot product's rounding (3 ulp of
-  // sum |e_0j c_0j|); the rows need it to u / 16 = 2^-28 relative, else the cell is a sliver
-  // left to the exact path.
-  const double det = glm::dot(e[0], c[0]);
-  const double detError = glm::dot(glm::abs(e[0]), error[0]) +
-                          0x1p-51 * glm::dot(glm::abs(e[0]), glm::abs(c[0]));
+    error = dvec3(x.error, y.error, z.error);
+    return dvec3(x.v, y.v, z.v);
+  };
+  // c[k + 1] = e[k + 1] x e[k + 2]: det times row k of the inverse; c[0] = f[0] x f[1] =
+  // c[1] + c[2] + c[3], so -c[0] / det is the gradient of l_0 = 1 - l_1 - l_2 - l_3.
+  dvec3 c[4], error[4];
+  c[0] = cross(f[0], f[1], error[0]);
+  for (int k = 0; k < 3; ++k) c[k + 1] = cross(e[(k + 1) % 3], e[(k + 2) % 3], error[k + 1]);
+  // det = e_0 . c_1 within the components' errors plus the dot product's rounding (3 ulp of
+  // sum |e_0j c_1j|); the gradients need it to u / 16 = 2^-28 relative, else the cell is a
+  // sliver left to the exact path.
+  const double det = glm::dot(e[0], c[1]);
+  const double detError =
+      glm::dot(glm::abs(e[0]), error[1]) + 0x1p-51 * glm::dot(glm::abs(e[0]), glm::abs(c[1]));
   if (!(det > 0.0) || !(detError <= 0x1p-28 * det)) return false;
   // Multiplying by 1 / det adds two double roundings (2^-52 relative) to the entries' error:
   // nothing beside the float rounding.
   const double inverse = 1.0 / det;
-  for (int k = 0; k < 3; ++k) {
+  const dvec3 extent = glm::abs(e[0]) + glm::abs(e[1]) + glm::abs(e[2]);  // D_j
+  double sumT = 0.0, maxT = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    const dvec3 g = (k == 0 ? -inverse : inverse) * c[k];
     for (int a = 0; a < 3; ++a) {
-      const float f = float(c[k][a] * inverse);
-      if (f != 0.0f && !std::isnormal(f)) return false;
-      rows[size_t(k)][a] = f;
+      const float x = float(g[a]);
+      if (x != 0.0f && !std::isnormal(x)) return false;
+      (a == 0 ? w.x : a == 1 ? w.y : w.z)[size_t(k)] = x;
     }
+    const double t = glm::dot(glm::abs(g), extent);  // T_k
+    sumT += t;
+    maxT = std::max(maxT, t);
+  }
+  // `inside` (see "the float fast path"), rounded up to float; infinite where u sum T_k >
+  // 2^-10, which the proof needs (only extreme slivers: T_k grows like the cell's aspect).
+  w.inside = std::numeric_limits<float>::infinity();
+  if (sumT * double(kUnitRoundoff) <= 0x1p-10) {
+    const double bound = 8.0 * double(kUnitRoundoff) * maxT * (1.0 + 0x1p-20) +
+                         4.0 * double(kUnitRoundoff) + double(kTiny);
+    float inside = float(bound);
+    if (double(inside) < bound) inside = std::nextafter(inside, w.inside);
+    w.inside = inside;
   }
   return true;
 }
 
-// locateProbe's walk on from the hint's neighbour `cell` (the hint counted as the first step):
-// out of line, so that the one-step case keeps a small frame.
-[[gnu::noinline]] void continueWalk(const ProbeSet& s, glm::vec3 p, int32_t cell,
-                                    const ProbeBlendSettings& blend, ProbeLocation& loc) {
-  locate3(s, p, cell, loc, s.walk.data(), 1);
+// locateProbe past its one-compare case: the hint's step with bounds computed from q, then
+// the walk on from the hint's neighbour (the hint counted as the first step), or from the
+// start. Out of line, so that the common case keeps a small frame.
+[[gnu::noinline]] ProbeLocation locateFromHint(const ProbeSet& s, Lanes point, int32_t hint,
+                                               Lanes q, Lanes l,
+                                               const ProbeBlendSettings& blend) noexcept {
+  const glm::vec3 p = toPoint(point);
+  const ProbeWalkCell& w = s.walk[size_t(hint)];
+  const int exit = fastInside(w, l) ? -1 : boundedDecision(w, q, l);
+  if (exit == -2 || (exit >= 0 && s.neighbours[size_t(hint)][exit] < 0)) {
+    return locate(s, p, hint, blend, true);
+  }
+  ProbeLocation loc;
+  if (exit == -1) {
+    loc = fastLocation(s, hint, l, 1);
+  } else {
+    locate3(s, p, s.neighbours[size_t(hint)][exit], loc, s.walk.data(), 1);
+  }
   weightByVisibility(s, p, loc, blend);
+  return loc;
 }
 
 }  // namespace
 
-void makeProbeWalkCell(const std::array<glm::vec3, 4>& v, glm::ivec4 next, ProbeWalkCell& w) {
+void makeProbeWalkCell(const std::array<glm::vec3, 4>& v, ProbeWalkCell& w) {
   w.origin = v[0];
-  w.next = next;
-  if (!walkRows(v.data(), w.rows)) w.rows.fill(glm::vec3(std::numeric_limits<float>::quiet_NaN()));
+  if (!walkRecord(v.data(), w)) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    w.x.fill(nan);
+    w.y.fill(nan);
+    w.z.fill(nan);
+    w.inside = std::numeric_limits<float>::infinity();
+  }
 }
 
 void prepareProbeLookup(ProbeSet& s) {
   s.walk.clear();
-  if (s.dimension != 3 || s.innerCellCount <= 0 || s.cells.size() < size_t(s.innerCellCount) ||
-      s.neighbours.size() < size_t(s.innerCellCount)) {
+  if (s.dimension != 3 || s.innerCellCount <= 0 || s.cells.size() < size_t(s.innerCellCount)) {
     return;
   }
   s.walk.reserve(size_t(s.innerCellCount));
@@ -836,39 +920,29 @@ void prepareProbeLookup(ProbeSet& s) {
     const glm::ivec4 t = s.cells[size_t(c)];
     makeProbeWalkCell({s.positions[size_t(t[0])], s.positions[size_t(t[1])],
                        s.positions[size_t(t[2])], s.positions[size_t(t[3])]},
-                      s.neighbours[size_t(c)], s.walk.emplace_back());
+                      s.walk.emplace_back());
   }
 }
 
 ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,
                           const ProbeBlendSettings& blend) noexcept {
   // The common case first: a hint whose cell still holds p (an object that stayed in its
-  // cell since the last lookup) takes one fast step and nothing else; a hint one face away
-  // continues the walk from the neighbour, as locate3 would from the hint. Every path returns
-  // this one `loc` (built in the caller's result, no copy).
-  ProbeLocation loc;
+  // cell since the last lookup) computes the four coordinates, settles the step with one
+  // compare against the record's `inside` and returns them as the weights, built in the
+  // caller's result. Anything else (a visibility-weighted blend, a point near a face or
+  // beyond it) goes on in locateFromHint.
   if (uint32_t(hint) < uint32_t(s.innerCellCount) && s.dimension == 3 &&
       s.walk.size() == size_t(s.innerCellCount)) {
     const ProbeWalkCell& w = s.walk[size_t(hint)];
-    float l[4];
-    const int exit = fastStep(w, p, l);
-    if (exit == -1) {
-      setFast(s, loc, hint, l);
-      loc.steps = 1;
-      if (blend.visibility && !s.visibility.empty()) {
-        weightByVisibility(s, p, loc, blend);
-      } else {
-        loc.weights = loc.barycentric;
-      }
-      return loc;
+    const Lanes point = pointLanes(p);
+    const Lanes q = fastQ(w, point);
+    const Lanes l = fastCoordinates(w, q);
+    if (fastInside(w, l) && !(blend.visibility && !s.visibility.empty())) {
+      return fastLocation(s, hint, l, 1);
     }
-    if (exit >= 0 && w.next[exit] >= 0) {
-      continueWalk(s, p, w.next[exit], blend, loc);
-      return loc;
-    }
+    return locateFromHint(s, point, hint, q, l, blend);
   }
-  loc = locate(s, p, hint, blend, true);
-  return loc;
+  return locate(s, p, hint, blend, true);
 }
 
 ProbeLocation locateProbeExact(const ProbeSet& s, glm::vec3 p, int32_t hint,

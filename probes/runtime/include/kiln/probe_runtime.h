@@ -4,7 +4,8 @@
 // the cell containing the point, crossing each time the face with the most negative
 // barycentric coordinate (Cupisz, GDC 2012); without a hint it starts from the seed grid.
 // Each step reads one 64-byte record (ProbeWalkCell) and decides in float where the float
-// error bound allows, with exact predicates near faces: the cell found is the exact walk's.
+// error bound allows (a point still in its hint's cell with one compare), with exact
+// predicates near faces: the cell found is the exact walk's.
 // Outside the hull the outer cells extrapolate continuously, so a lookup always succeeds.
 // When the set has per-probe visibility (ProbeSet::visibility) the barycentric weights are
 // multiplied by each probe's visibility of the point and renormalized

@@ -98,17 +98,23 @@ struct ProbeVisibility {
 };
 
 // What one step of the walk through a tetrahedron reads, in one 64-byte record (derived from
-// positions, cells and neighbours by prepareProbeLookup; not stored in the .kprobe file): the
-// barycentric coordinates of p in float, l_k = dot(rows[k - 1], p - origin) for k = 1, 2, 3
-// and l_0 = 1 - l_1 - l_2 - l_3 (rows: the inverse of the edge matrix [v1 - v0, v2 - v0,
-// v3 - v0], origin = v0), and next[k] = neighbours[cell][k]. The lookup trusts the float
-// signs only beyond an error bound (probe_runtime.cpp) and uses the exact predicates
-// otherwise; rows are NaN for a cell whose map cannot be made accurate to float precision
-// (an extreme sliver), which then always takes the exact path.
+// positions and cells by prepareProbeLookup; not stored in the .kprobe file): the barycentric
+// coordinates of p in float, l_k = c_k + x[k] q.x + y[k] q.y + z[k] q.z with q = p - origin,
+// origin = v0 and c = (1, 0, 0, 0), each lane its own affine function of p. Lanes 1..3 hold the
+// rows of the inverse of the edge matrix [v1 - v0, v2 - v0, v3 - v0]; lane 0 the gradient of
+// l_0 = 1 - l_1 - l_2 - l_3, computed as its own cross product (-(v2 - v1) x (v3 - v1) over the
+// determinant), so that the four coordinates are four lanes of one SIMD register. `inside`
+// bounds the float error of every l_k for any p inside the cell: l_k > inside for every k
+// proves p inside (probe_runtime.cpp derives it), so a lookup whose point stayed in its cell
+// decides with one compare. The neighbours a step leaves to are ProbeSet::neighbours. The
+// lookup trusts the float signs only beyond an error bound and uses the exact predicates
+// otherwise; the gradients are NaN and `inside` infinite for a cell whose map cannot be made
+// accurate to float precision (an extreme sliver), which then always takes the exact path.
 struct alignas(64) ProbeWalkCell {
+  std::array<float, 4> x{}, y{}, z{};  // lane k: the gradient of l_k
   glm::vec3 origin{0.0f};
-  std::array<glm::vec3, 3> rows{};
-  glm::ivec4 next{-1};
+  float inside = 0.0f;
+  glm::vec3 gradient(int k) const { return {x[size_t(k)], y[size_t(k)], z[size_t(k)]}; }
 };
 static_assert(sizeof(ProbeWalkCell) == 64);
 
@@ -129,7 +135,7 @@ struct ProbeSet {
   // Derived walk records, one per inner cell (dimension 3): filled by prepareProbeLookup,
   // which buildProbeTopology and the .kprobe readers call. Empty (or stale in size) = the
   // lookup walks with the exact predicates alone. Call prepareProbeLookup again after
-  // changing positions, cells or neighbours.
+  // changing positions or cells.
   std::vector<ProbeWalkCell> walk;
 
   int32_t probeCount() const { return int32_t(positions.size()); }
@@ -141,14 +147,13 @@ struct ProbeSet {
 // zeros otherwise). Called by the bake after the normals are set.
 void computeOuterCellCubics(ProbeSet& set);
 
-// Fills set.walk from positions, cells and neighbours (dimension 3; cleared otherwise).
+// Fills set.walk from positions and cells (dimension 3; cleared otherwise).
 // Requires a complete, valid topology (validateProbeSet).
 void prepareProbeLookup(ProbeSet& set);
 // One inner cell's record as prepareProbeLookup makes it, from the tetrahedron's four
-// positions (positively oriented) and its neighbours: for a builder that writes the records in
-// its own pass over the cells (buildProbeTopology).
-void makeProbeWalkCell(const std::array<glm::vec3, 4>& corners, glm::ivec4 next,
-                       ProbeWalkCell& out);
+// positions (positively oriented): for a builder that writes the records in its own pass over
+// the cells (buildProbeTopology).
+void makeProbeWalkCell(const std::array<glm::vec3, 4>& corners, ProbeWalkCell& out);
 
 // Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most kSeedGridMaxAxis
 // per axis, each seed a cell whose centroid lies in the grid cell (the one nearest its
