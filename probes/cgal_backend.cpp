@@ -50,12 +50,13 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
     // anywhere in it (50 MB for 100k probes): the cell kAhead places ahead has its vertices
     // and neighbours fetched, so that those misses overlap instead of following each other.
     Tetrahedralization r;
-    r.tets.reserve(size_t(count));
-    r.neighbours.reserve(size_t(count));
+    r.positive = true;  // CGAL's finite cells are positively oriented (exact predicates)
+    r.tets.resize(size_t(count));
+    BackendTet* out = r.tets.data();
     constexpr int kAhead = 8;
     auto ahead = dt.finite_cells_begin();
     for (int i = 0; i < kAhead && ahead != dt.finite_cells_end(); ++i) ++ahead;
-    for (auto c = dt.finite_cells_begin(); c != dt.finite_cells_end(); ++c) {
+    for (auto c = dt.finite_cells_begin(); c != dt.finite_cells_end(); ++c, ++out) {
       if (ahead != dt.finite_cells_end()) {
         for (int k = 0; k < 4; ++k) {
           prefetch(&*ahead->vertex(k));
@@ -63,10 +64,10 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
         }
         ++ahead;
       }
-      r.tets.push_back({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
-                        c->vertex(3)->info()});
-      r.neighbours.push_back({c->neighbor(0)->info(), c->neighbor(1)->info(),
-                              c->neighbor(2)->info(), c->neighbor(3)->info()});
+      out->v = {c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
+                c->vertex(3)->info()};
+      out->n = {c->neighbor(0)->info(), c->neighbor(1)->info(), c->neighbor(2)->info(),
+                c->neighbor(3)->info()};
     }
     return r;
   } catch (const std::exception& e) {

@@ -16,13 +16,21 @@
 
 namespace kiln::detail {
 
-using Tets = std::vector<std::array<int32_t, 4>>;
 
-// A 3D Delaunay tetrahedralization: neighbours[t][k] is the tetrahedron across the face of
-// tets[t] opposite its vertex k, or -1 where that face is on the convex hull.
+// One tetrahedron of a backend's output: its vertices v (indices into `points`) and its
+// neighbours n, n[k] the tetrahedron across the face opposite v[k] or -1 where that face is on
+// the convex hull. One 32-byte record, so that reading a tetrahedron in another order than
+// the backend's touches one cache line.
+struct alignas(32) BackendTet {
+  std::array<int32_t, 4> v, n;
+};
+
+// A 3D Delaunay tetrahedralization. `positive`: every tetrahedron is positively oriented
+// (orient3d(v0, v1, v2, v3) > 0 exactly), as CGAL guarantees, so that the caller can orient
+// a permutation by its parity instead of a predicate.
 struct Tetrahedralization {
-  Tets tets;
-  Tets neighbours;
+  std::vector<BackendTet> tets;
+  bool positive = false;
 };
 using Triangles = std::vector<std::array<int32_t, 3>>;
 

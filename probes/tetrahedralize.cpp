@@ -13,6 +13,7 @@
 #include "kiln/probe_runtime.h"
 #include "probes/delaunay_backends.h"
 #include "probes/runtime/src/prefetch.h"
+#include "probes/runtime/src/seed_grid.h"
 
 namespace kiln {
 namespace {
@@ -208,7 +209,8 @@ struct CurveKeys {
 };
 
 // `words` holds key << 32 | index into `tets` per cell; sorted in place.
-std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets& tets) {
+std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
+                                const std::vector<detail::BackendTet>& tets) {
   const size_t n = words.size();
   std::vector<uint64_t> swap(n);
   // LSD radix sort on the 3 x kCurveBits key bits in two passes (stable): sorting the words
@@ -232,7 +234,7 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets
     while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
     if (j - i > 1) {
       std::sort(order.begin() + long(i), order.begin() + long(j),
-                [&](int32_t a, int32_t b) { return tets[size_t(a)] < tets[size_t(b)]; });
+                [&](int32_t a, int32_t b) { return tets[size_t(a)].v < tets[size_t(b)].v; });
     }
     i = j;
   }
@@ -242,6 +244,7 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets
 Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dvec3 lo,
                         dvec3 hi, const ProbeTopologySettings& settings) {
   const auto& P = ctx.positions;
+  if (P.size() >= (size_t(1) << 30)) return Error{"too many probes (2^30 or more)"};
   std::vector<dvec3> pts(reps.size());
   for (size_t i = 0; i < reps.size(); ++i) pts[i] = dvec3(P[reps[i]]);
   Result<detail::Tetrahedralization> raw = settings.backend == DelaunayBackend::TetGen
@@ -252,38 +255,59 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // Pass 1, in the backend's order and in place: each tetrahedron's probes sorted, then the
   // last two swapped if that makes the orientation positive, its backend neighbours following
   // their vertices to the new slots; its curve key; flat ones marked (probe -1) and left out.
-  detail::Tets& tets = raw->tets;
-  detail::Tets& backendNeighbours = raw->neighbours;
+  std::vector<detail::BackendTet>& tets = raw->tets;
   std::vector<uint64_t> words;
   words.reserve(tets.size());
   const CurveKeys curve(lo, hi);
   int flat = 0;
   size_t hullFaces = 0;
   for (size_t r = 0; r < tets.size(); ++r) {
-    std::array<int32_t, 4>& t = tets[r];
-    int32_t v[4] = {reps[size_t(t[0])], reps[size_t(t[1])], reps[size_t(t[2])],
-                    reps[size_t(t[3])]};
-    int slot[4] = {0, 1, 2, 3};
-    for (int i = 1; i < 4; ++i) {  // insertion sort, carrying the slots along
-      for (int j = i; j > 0 && v[j - 1] > v[j]; --j) {
-        std::swap(v[j - 1], v[j]);
-        std::swap(slot[j - 1], slot[j]);
-      }
+    detail::BackendTet& t = tets[r];
+    // Probe index and slot in one word (indices < 2^30, checked by the caller), sorted by a
+    // network of five compare-exchanges (min / max, no branches on the data).
+    uint32_t w[4];
+    for (int k = 0; k < 4; ++k) w[k] = uint32_t(reps[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
+    auto exchange = [&](int i, int j) {
+      const uint32_t a = std::min(w[i], w[j]), b = std::max(w[i], w[j]);
+      w[i] = a;
+      w[j] = b;
+    };
+    exchange(0, 1);
+    exchange(2, 3);
+    exchange(0, 2);
+    exchange(1, 3);
+    exchange(1, 2);
+    int32_t v[4];
+    int slot[4];
+    for (int k = 0; k < 4; ++k) {
+      v[k] = int32_t(w[k] >> 2);
+      slot[k] = int(w[k] & 3);
     }
     const glm::vec3 a = P[size_t(v[0])], b = P[size_t(v[1])], c = P[size_t(v[2])],
                     d = P[size_t(v[3])];
-    const double o = orient3d(a, b, c, d);
-    if (o == 0.0) {
-      ++flat;
-      t[0] = -1;
-      continue;
+    bool negative;
+    if (raw->positive) {
+      // The sorted order is the backend's permuted by `slot`: an odd permutation of a
+      // positive tetrahedron is negative (as orient3d would say, without its arithmetic).
+      const int inversions = int(slot[0] > slot[1]) + int(slot[0] > slot[2]) +
+                             int(slot[0] > slot[3]) + int(slot[1] > slot[2]) +
+                             int(slot[1] > slot[3]) + int(slot[2] > slot[3]);
+      negative = (inversions & 1) != 0;
+    } else {
+      const double o = orient3d(a, b, c, d);
+      if (o == 0.0) {
+        ++flat;
+        t.v[0] = -1;
+        continue;
+      }
+      negative = o < 0.0;
     }
-    if (o < 0.0) {  // an odd permutation makes it positive
+    if (negative) {  // an odd permutation makes it positive
       std::swap(v[2], v[3]);
       std::swap(slot[2], slot[3]);
     }
-    t = {v[0], v[1], v[2], v[3]};
-    std::array<int32_t, 4>& n = backendNeighbours[r];
+    t.v = {v[0], v[1], v[2], v[3]};
+    std::array<int32_t, 4>& n = t.n;
     n = {n[size_t(slot[0])], n[size_t(slot[1])], n[size_t(slot[2])], n[size_t(slot[3])]};
     hullFaces += size_t(n[0] < 0) + size_t(n[1] < 0) + size_t(n[2] < 0) + size_t(n[3] < 0);
     words.push_back((uint64_t(curve.of(a, b, c, d)) << 32) | r);
@@ -296,8 +320,9 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
 
   // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
-  // then faces are matched instead), the hull faces (no tetrahedron beyond) and the walk
-  // records, whose links across the hull are set with the outer cells below.
+  // then faces are matched instead), the hull faces (no tetrahedron beyond), the walk
+  // records, whose links across the hull are set with the outer cells below, and the seed
+  // grid's candidates (each cell offered as buildProbeSeedGrid would, in the same order).
   auto face = [&](int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
@@ -315,44 +340,42 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
     hull.reserve(hullFaces);
     s.walk.reserve(size_t(inner));
+    runtime_detail::SeedGridBuilder grid(s.positions, 3, inner, settings.cellsPerSeed);
     for (int32_t i = 0; i < inner; ++i) {
-      // The backend's arrays are read in the new order, scattered over 20 MB: fetch a row
-      // kAhead cells ahead, and the renumbering entries of its neighbours half as far ahead
-      // (by then that row has arrived), so that the misses overlap.
+      // The backend's records are read in the new order, scattered over 20 MB: fetch the
+      // record kAhead cells ahead, and the renumbering entries of its neighbours half as far
+      // ahead (by then that record has arrived), so that the misses overlap.
       constexpr int32_t kAhead = 16;
-      if (i + kAhead < inner) {
-        const size_t ahead = size_t(order[size_t(i + kAhead)]);
-        prefetch(&tets[ahead]);
-        prefetch(&backendNeighbours[ahead]);
-      }
+      if (i + kAhead < inner) prefetch(&tets[size_t(order[size_t(i + kAhead)])]);
       if (i + kAhead / 2 < inner) {
-        for (int32_t n : backendNeighbours[size_t(order[size_t(i + kAhead / 2)])]) {
+        for (int32_t n : tets[size_t(order[size_t(i + kAhead / 2)])].n) {
           if (n >= 0) prefetch(&newIndex[size_t(n)]);
         }
       }
-      const size_t r = size_t(order[size_t(i)]);
-      const std::array<int32_t, 4>& t = tets[r];
-      const std::array<int32_t, 4>& n = backendNeighbours[r];
-      const glm::ivec4 cell(t[0], t[1], t[2], t[3]);
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
+      const glm::ivec4 cell(t.v[0], t.v[1], t.v[2], t.v[3]);
       glm::ivec4 links(-1);
       s.cells.push_back(cell);
       for (int k = 0; k < 4; ++k) {
-        used[size_t(t[size_t(k)])] = 1;
-        if (n[size_t(k)] >= 0) {
-          links[k] = newIndex[size_t(n[size_t(k)])];
+        used[size_t(t.v[size_t(k)])] = 1;
+        if (t.n[size_t(k)] >= 0) {
+          links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
           hull.push_back(face(i, k));
         }
       }
       s.neighbours.push_back(links);
-      makeProbeWalkCell({P[size_t(t[0])], P[size_t(t[1])], P[size_t(t[2])], P[size_t(t[3])]},
-                        links, s.walk.emplace_back());
+      const glm::vec3 a = P[size_t(cell[0])], b = P[size_t(cell[1])], c = P[size_t(cell[2])],
+                      d = P[size_t(cell[3])];
+      makeProbeWalkCell({a, b, c, d}, links, s.walk.emplace_back());
+      grid.offer(i, a + b + c + d);
     }
+    s.grid = grid.finish();
   } else {
     for (int32_t i = 0; i < inner; ++i) {
-      const std::array<int32_t, 4>& t = tets[size_t(order[size_t(i)])];
-      s.cells.push_back(glm::ivec4(t[0], t[1], t[2], t[3]));
-      for (int k = 0; k < 4; ++k) used[size_t(t[size_t(k)])] = 1;
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
+      s.cells.push_back(glm::ivec4(t.v[0], t.v[1], t.v[2], t.v[3]));
+      for (int k = 0; k < 4; ++k) used[size_t(t.v[size_t(k)])] = 1;
     }
     s.neighbours.assign(size_t(inner), glm::ivec4(-1));
     std::vector<FaceRef> refs;
@@ -364,8 +387,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     if (!open) return Error{open.error()};
     hull = std::move(open).value();
   }
-  detail::Tets().swap(tets);  // the backend's arrays are no longer needed
-  detail::Tets().swap(backendNeighbours);
+  std::vector<detail::BackendTet>().swap(tets);  // the backend's records are no longer needed
   int unused = 0;
   for (int32_t r : reps) unused += used[size_t(r)] ? 0 : 1;
   if (unused > 0) {
@@ -676,7 +698,8 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.dimension != 3 || set.walk.size() != size_t(set.innerCellCount)) {
     prepareProbeLookup(set);
   }
-  buildProbeSeedGrid(set, settings.cellsPerSeed);
+  // build3 offers its cells to the seed grid in its pass over them (unless it matched faces).
+  if (set.grid.seeds.empty()) buildProbeSeedGrid(set, settings.cellsPerSeed);
   Status st = validateProbeSet(set, "buildProbeTopology");
   if (!st) return Error{st.error()};
   return set;
