@@ -25,11 +25,16 @@ struct alignas(32) BackendTet {
   std::array<int32_t, 4> v, n;
 };
 
-// A 3D Delaunay tetrahedralization. `positive`: every tetrahedron is positively oriented
-// (orient3d(v0, v1, v2, v3) > 0 exactly), as CGAL guarantees, so that the caller can orient
-// a permutation by its parity instead of a predicate.
+// A 3D Delaunay tetrahedralization. `vertices`, when not empty, is the backend's own vertex
+// order: tets' v index into it, and vertices[j] is the index into `points` (CGAL numbers its
+// vertices in memory order, which follows its spatial sort, so that the caller's gathers of
+// vertex data for nearby tetrahedra stay in cache); empty = v indexes `points` directly.
+// `positive`: every tetrahedron is positively oriented (orient3d(v0, v1, v2, v3) > 0
+// exactly), as CGAL guarantees, so that the caller can orient a permutation by its parity
+// instead of a predicate.
 struct Tetrahedralization {
   std::vector<BackendTet> tets;
+  std::vector<int32_t> vertices;
   bool positive = false;
 };
 using Triangles = std::vector<std::array<int32_t, 3>>;

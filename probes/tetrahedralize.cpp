@@ -208,9 +208,11 @@ struct CurveKeys {
   }
 };
 
-// `words` holds key << 32 | index into `tets` per cell; sorted in place.
+// `words` holds key << 32 | index into `tets` per cell; sorted in place. Tetrahedra hold
+// backend vertex numbers, probeOf maps them to probe indices.
 std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
-                                const std::vector<detail::BackendTet>& tets) {
+                                const std::vector<detail::BackendTet>& tets,
+                                const std::vector<int32_t>& probeOf) {
   const size_t n = words.size();
   std::vector<uint64_t> swap(n);
   // LSD radix sort on the 3 x kCurveBits key bits in two passes (stable): sorting the words
@@ -234,7 +236,15 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
     while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
     if (j - i > 1) {
       std::sort(order.begin() + long(i), order.begin() + long(j),
-                [&](int32_t a, int32_t b) { return tets[size_t(a)].v < tets[size_t(b)].v; });
+                [&](int32_t a, int32_t b) {
+                  const std::array<int32_t, 4>&u = tets[size_t(a)].v, &v = tets[size_t(b)].v;
+                  for (int k = 0; k < 4; ++k) {
+                    const int32_t x = probeOf[size_t(u[size_t(k)])];
+                    const int32_t y = probeOf[size_t(v[size_t(k)])];
+                    if (x != y) return x < y;
+                  }
+                  return false;
+                });
     }
     i = j;
   }
@@ -252,9 +262,19 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
                                                : detail::cgalDelaunay3(pts);
   if (!raw) return Error{raw.error()};
   ProbeSet s = emptySet(ctx, 3);
-  // Pass 1, in the backend's order and in place: each tetrahedron's probes sorted, then the
-  // last two swapped if that makes the orientation positive, its backend neighbours following
-  // their vertices to the new slots; its curve key; flat ones marked (probe -1) and left out.
+  // The backend's vertices, in its order: their probes and positions (read per tetrahedron
+  // below; in the backend's spatial order they stay in cache, in the caller's they would not).
+  const size_t vertexCount = raw->vertices.empty() ? pts.size() : raw->vertices.size();
+  std::vector<int32_t> probeOf(vertexCount);
+  std::vector<glm::vec3> Q(vertexCount);
+  for (size_t j = 0; j < vertexCount; ++j) {
+    probeOf[j] = reps[raw->vertices.empty() ? j : size_t(raw->vertices[j])];
+    Q[j] = P[size_t(probeOf[j])];
+  }
+  // Pass 1, in the backend's order and in place: each tetrahedron's vertices sorted by probe
+  // index, then the last two swapped if that makes the orientation positive, its backend
+  // neighbours following their vertices to the new slots; its curve key; flat ones marked
+  // (vertex -1) and left out. The records keep backend vertex numbers.
   std::vector<detail::BackendTet>& tets = raw->tets;
   std::vector<uint64_t> words;
   words.reserve(tets.size());
@@ -266,7 +286,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     // Probe index and slot in one word (indices < 2^30, checked by the caller), sorted by a
     // network of five compare-exchanges (min / max, no branches on the data).
     uint32_t w[4];
-    for (int k = 0; k < 4; ++k) w[k] = uint32_t(reps[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
+    for (int k = 0; k < 4; ++k) w[k] = uint32_t(probeOf[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
     auto exchange = [&](int i, int j) {
       const uint32_t a = std::min(w[i], w[j]), b = std::max(w[i], w[j]);
       w[i] = a;
@@ -277,14 +297,14 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     exchange(0, 2);
     exchange(1, 3);
     exchange(1, 2);
-    int32_t v[4];
+    int32_t v[4];  // backend vertex numbers, in probe order
     int slot[4];
     for (int k = 0; k < 4; ++k) {
-      v[k] = int32_t(w[k] >> 2);
       slot[k] = int(w[k] & 3);
+      v[k] = t.v[size_t(slot[k])];
     }
-    const glm::vec3 a = P[size_t(v[0])], b = P[size_t(v[1])], c = P[size_t(v[2])],
-                    d = P[size_t(v[3])];
+    const glm::vec3 a = Q[size_t(v[0])], b = Q[size_t(v[1])], c = Q[size_t(v[2])],
+                    d = Q[size_t(v[3])];
     bool negative;
     if (raw->positive) {
       // The sorted order is the backend's permuted by `slot`: an odd permutation of a
@@ -314,7 +334,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
   if (words.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  const std::vector<int32_t> order = curveOrder(words, tets);
+  const std::vector<int32_t> order = curveOrder(words, tets, probeOf);
   std::vector<uint64_t>().swap(words);
   const int32_t inner = int32_t(order.size());
 
@@ -331,7 +351,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     std::sort(f.begin(), f.end());
     return FaceRef{f, c, k};
   };
-  std::vector<int32_t> used(P.size(), 0);
+  std::vector<int32_t> used(vertexCount, 0);  // per backend vertex
   std::vector<FaceRef> hull;
   s.cells.reserve(size_t(inner) + hullFaces);
   s.neighbours.reserve(size_t(inner) + hullFaces);
@@ -353,7 +373,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
         }
       }
       const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
-      const glm::ivec4 cell(t.v[0], t.v[1], t.v[2], t.v[3]);
+      const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                            probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
       glm::ivec4 links(-1);
       s.cells.push_back(cell);
       for (int k = 0; k < 4; ++k) {
@@ -365,8 +386,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
         }
       }
       s.neighbours.push_back(links);
-      const glm::vec3 a = P[size_t(cell[0])], b = P[size_t(cell[1])], c = P[size_t(cell[2])],
-                      d = P[size_t(cell[3])];
+      const glm::vec3 a = Q[size_t(t.v[0])], b = Q[size_t(t.v[1])], c = Q[size_t(t.v[2])],
+                      d = Q[size_t(t.v[3])];
       makeProbeWalkCell({a, b, c, d}, links, s.walk.emplace_back());
       grid.offer(i, a + b + c + d);
     }
@@ -374,7 +395,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   } else {
     for (int32_t i = 0; i < inner; ++i) {
       const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
-      s.cells.push_back(glm::ivec4(t.v[0], t.v[1], t.v[2], t.v[3]));
+      s.cells.push_back(glm::ivec4(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                                   probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]));
       for (int k = 0; k < 4; ++k) used[size_t(t.v[size_t(k)])] = 1;
     }
     s.neighbours.assign(size_t(inner), glm::ivec4(-1));
@@ -388,8 +410,10 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     hull = std::move(open).value();
   }
   std::vector<detail::BackendTet>().swap(tets);  // the backend's records are no longer needed
-  int unused = 0;
-  for (int32_t r : reps) unused += used[size_t(r)] ? 0 : 1;
+  // Every backend vertex is a distinct representative probe, so the unused ones are the
+  // representatives minus the vertices some tetrahedron has.
+  int unused = int(reps.size());
+  for (int32_t u : used) unused -= u;
   if (unused > 0) {
     ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
   }
