@@ -66,9 +66,14 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
   constexpr uint64_t kEmpty = ~uint64_t(0);
   std::vector<uint64_t> keys(capacity, kEmpty);
   std::vector<int32_t> head(capacity, -1), next(P.size(), -1);
+  // One bit per slot, set when the slot holds a key: almost every cell searched is empty (the
+  // cells are far smaller than the probe spacing), and a clear bit at the home slot settles
+  // that in a bitmap that stays in cache, where the keys (16 bytes a probe) would not.
+  std::vector<uint64_t> occupied(capacity / 64 + 1, 0);
   auto slot = [&](uint64_t k) {
     uint64_t h = k * 0x9e3779b97f4a7c15ull;  // Fibonacci hashing, then linear probing
     size_t i = size_t(h >> 32) & (capacity - 1);
+    if (!(occupied[i >> 6] >> (i & 63) & 1)) return i;
     while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & (capacity - 1);
     return i;
   };
@@ -99,6 +104,7 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
       const uint64_t k = key(gx, gy, gz);
       const size_t at = slot(k);
       keys[at] = k;
+      occupied[at >> 6] |= uint64_t(1) << (at & 63);
       next[i] = head[at];
       head[at] = int32_t(i);
     }
@@ -215,12 +221,14 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
                                 const std::vector<int32_t>& probeOf) {
   const size_t n = words.size();
   std::vector<uint64_t> swap(n);
-  // LSD radix sort on the 3 x kCurveBits key bits in two passes (stable): sorting the words
-  // sorts by key, ties by the backend's index.
-  constexpr int kDigit = 15;
-  static_assert(2 * kDigit >= 3 * kCurveBits);
+  // LSD radix sort on the 3 x kCurveBits key bits in three passes (stable): sorting the words
+  // sorts by key, ties by the backend's index. 10-bit digits keep each pass's counters and
+  // write positions in L1 (15-bit ones in two passes scatter over 32768 places).
+  constexpr int kDigit = 10;
+  constexpr int kPasses = 3;
+  static_assert(kPasses * kDigit >= 3 * kCurveBits);
   std::vector<uint32_t> count((1u << kDigit) + 1);
-  for (int pass = 0; pass < 2; ++pass) {
+  for (int pass = 0; pass < kPasses; ++pass) {
     const int shift = 32 + pass * kDigit;
     std::fill(count.begin(), count.end(), 0u);
     for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
