@@ -42,20 +42,27 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
     if (dt.dimension() != 3) {
       return Error{"CGAL: triangulation has dimension " + std::to_string(dt.dimension())};
     }
-    // Number the finite cells (infinite ones, beyond the hull faces, get -1), then read
-    // CGAL's adjacency: neighbor(k) is opposite vertex(k), as the caller expects.
+    // Number the vertices in memory order (their info becomes that number, the input index
+    // goes to r.vertices) and the finite cells (infinite ones, beyond the hull faces, get -1),
+    // then read CGAL's adjacency: neighbor(k) is opposite vertex(k), as the caller expects.
+    Tetrahedralization r;
+    r.vertices.reserve(dt.number_of_vertices());
+    for (auto v : dt.finite_vertex_handles()) {
+      r.vertices.push_back(v->info());
+      v->info() = int32_t(r.vertices.size() - 1);
+    }
     int32_t count = 0;
     for (auto c : dt.all_cell_handles()) c->info() = dt.is_infinite(c) ? -1 : count++;
     // The cells are read in CGAL's memory order, but their vertices and neighbours lie
     // anywhere in it (50 MB for 100k probes): the cell kAhead places ahead has its vertices
     // and neighbours fetched, so that those misses overlap instead of following each other.
-    Tetrahedralization r;
-    r.tets.reserve(size_t(count));
-    r.neighbours.reserve(size_t(count));
+    r.positive = true;  // CGAL's finite cells are positively oriented (exact predicates)
+    r.tets.resize(size_t(count));
+    BackendTet* out = r.tets.data();
     constexpr int kAhead = 8;
     auto ahead = dt.finite_cells_begin();
     for (int i = 0; i < kAhead && ahead != dt.finite_cells_end(); ++i) ++ahead;
-    for (auto c = dt.finite_cells_begin(); c != dt.finite_cells_end(); ++c) {
+    for (auto c = dt.finite_cells_begin(); c != dt.finite_cells_end(); ++c, ++out) {
       if (ahead != dt.finite_cells_end()) {
         for (int k = 0; k < 4; ++k) {
           prefetch(&*ahead->vertex(k));
@@ -63,10 +70,10 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
         }
         ++ahead;
       }
-      r.tets.push_back({c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
-                        c->vertex(3)->info()});
-      r.neighbours.push_back({c->neighbor(0)->info(), c->neighbor(1)->info(),
-                              c->neighbor(2)->info(), c->neighbor(3)->info()});
+      out->v = {c->vertex(0)->info(), c->vertex(1)->info(), c->vertex(2)->info(),
+                c->vertex(3)->info()};
+      out->n = {c->neighbor(0)->info(), c->neighbor(1)->info(), c->neighbor(2)->info(),
+                c->neighbor(3)->info()};
     }
     return r;
   } catch (const std::exception& e) {

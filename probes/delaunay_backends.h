@@ -16,13 +16,26 @@
 
 namespace kiln::detail {
 
-using Tets = std::vector<std::array<int32_t, 4>>;
 
-// A 3D Delaunay tetrahedralization: neighbours[t][k] is the tetrahedron across the face of
-// tets[t] opposite its vertex k, or -1 where that face is on the convex hull.
+// One tetrahedron of a backend's output: its vertices v (indices into `points`) and its
+// neighbours n, n[k] the tetrahedron across the face opposite v[k] or -1 where that face is on
+// the convex hull. One 32-byte record, so that reading a tetrahedron in another order than
+// the backend's touches one cache line.
+struct alignas(32) BackendTet {
+  std::array<int32_t, 4> v, n;
+};
+
+// A 3D Delaunay tetrahedralization. `vertices`, when not empty, is the backend's own vertex
+// order: tets' v index into it, and vertices[j] is the index into `points` (CGAL numbers its
+// vertices in memory order, which follows its spatial sort, so that the caller's gathers of
+// vertex data for nearby tetrahedra stay in cache); empty = v indexes `points` directly.
+// `positive`: every tetrahedron is positively oriented (orient3d(v0, v1, v2, v3) > 0
+// exactly), as CGAL guarantees, so that the caller can orient a permutation by its parity
+// instead of a predicate.
 struct Tetrahedralization {
-  Tets tets;
-  Tets neighbours;
+  std::vector<BackendTet> tets;
+  std::vector<int32_t> vertices;
+  bool positive = false;
 };
 using Triangles = std::vector<std::array<int32_t, 3>>;
 
@@ -32,7 +45,7 @@ using Triangles = std::vector<std::array<int32_t, 3>>;
 Result<Tetrahedralization> tetgenDelaunay3(std::span<const glm::dvec3> points);
 
 // CGAL Delaunay_triangulation_3 with Exact_predicates_inexact_constructions_kernel (the
-// default backend: about twice as fast as TetGen on random probes).
+// faster backend; TetGen stays the default, docs/probes.md "Delaunay backends").
 Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points);
 
 // CGAL Delaunay_triangulation_2 (the fallback for coplanar probes), counter-clockwise faces.

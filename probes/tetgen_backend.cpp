@@ -31,12 +31,11 @@ Result<Tetrahedralization> tetgenDelaunay3(std::span<const glm::dvec3> points) {
     if (out.neighborlist == nullptr) return Error{"TetGen: no neighbour list"};
     Tetrahedralization r;
     r.tets.resize(size_t(out.numberoftetrahedra));
-    r.neighbours.resize(r.tets.size());
     for (int t = 0; t < out.numberoftetrahedra; ++t) {
       for (int k = 0; k < 4; ++k) {
-        r.tets[size_t(t)][k] = out.tetrahedronlist[t * out.numberofcorners + k];
+        r.tets[size_t(t)].v[k] = out.tetrahedronlist[t * out.numberofcorners + k];
         const int n = out.neighborlist[4 * t + k];
-        r.neighbours[size_t(t)][k] = n >= 0 && n < out.numberoftetrahedra ? n : -1;
+        r.tets[size_t(t)].n[k] = n >= 0 && n < out.numberoftetrahedra ? n : -1;
       }
     }
     return r;

@@ -13,6 +13,7 @@
 #include "kiln/probe_runtime.h"
 #include "probes/delaunay_backends.h"
 #include "probes/runtime/src/prefetch.h"
+#include "probes/runtime/src/seed_grid.h"
 
 namespace kiln {
 namespace {
@@ -65,9 +66,14 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
   constexpr uint64_t kEmpty = ~uint64_t(0);
   std::vector<uint64_t> keys(capacity, kEmpty);
   std::vector<int32_t> head(capacity, -1), next(P.size(), -1);
+  // One bit per slot, set when the slot holds a key: almost every cell searched is empty (the
+  // cells are far smaller than the probe spacing), and a clear bit at the home slot settles
+  // that in a bitmap that stays in cache, where the keys (16 bytes a probe) would not.
+  std::vector<uint64_t> occupied(capacity / 64 + 1, 0);
   auto slot = [&](uint64_t k) {
     uint64_t h = k * 0x9e3779b97f4a7c15ull;  // Fibonacci hashing, then linear probing
     size_t i = size_t(h >> 32) & (capacity - 1);
+    if (!(occupied[i >> 6] >> (i & 63) & 1)) return i;
     while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & (capacity - 1);
     return i;
   };
@@ -98,6 +104,7 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
       const uint64_t k = key(gx, gy, gz);
       const size_t at = slot(k);
       keys[at] = k;
+      occupied[at >> 6] |= uint64_t(1) << (at & 63);
       next[i] = head[at];
       head[at] = int32_t(i);
     }
@@ -207,16 +214,21 @@ struct CurveKeys {
   }
 };
 
-// `words` holds key << 32 | index into `tets` per cell; sorted in place.
-std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets& tets) {
+// `words` holds key << 32 | index into `tets` per cell; sorted in place. Tetrahedra hold
+// backend vertex numbers, probeOf maps them to probe indices.
+std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
+                                const std::vector<detail::BackendTet>& tets,
+                                const std::vector<int32_t>& probeOf) {
   const size_t n = words.size();
   std::vector<uint64_t> swap(n);
-  // LSD radix sort on the 3 x kCurveBits key bits in two passes (stable): sorting the words
-  // sorts by key, ties by the backend's index.
-  constexpr int kDigit = 15;
-  static_assert(2 * kDigit >= 3 * kCurveBits);
+  // LSD radix sort on the 3 x kCurveBits key bits in three passes (stable): sorting the words
+  // sorts by key, ties by the backend's index. 10-bit digits keep each pass's counters and
+  // write positions in L1 (15-bit ones in two passes scatter over 32768 places).
+  constexpr int kDigit = 10;
+  constexpr int kPasses = 3;
+  static_assert(kPasses * kDigit >= 3 * kCurveBits);
   std::vector<uint32_t> count((1u << kDigit) + 1);
-  for (int pass = 0; pass < 2; ++pass) {
+  for (int pass = 0; pass < kPasses; ++pass) {
     const int shift = 32 + pass * kDigit;
     std::fill(count.begin(), count.end(), 0u);
     for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
@@ -232,7 +244,15 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets
     while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
     if (j - i > 1) {
       std::sort(order.begin() + long(i), order.begin() + long(j),
-                [&](int32_t a, int32_t b) { return tets[size_t(a)] < tets[size_t(b)]; });
+                [&](int32_t a, int32_t b) {
+                  const std::array<int32_t, 4>&u = tets[size_t(a)].v, &v = tets[size_t(b)].v;
+                  for (int k = 0; k < 4; ++k) {
+                    const int32_t x = probeOf[size_t(u[size_t(k)])];
+                    const int32_t y = probeOf[size_t(v[size_t(k)])];
+                    if (x != y) return x < y;
+                  }
+                  return false;
+                });
     }
     i = j;
   }
@@ -242,6 +262,7 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words, const detail::Tets
 Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dvec3 lo,
                         dvec3 hi, const ProbeTopologySettings& settings) {
   const auto& P = ctx.positions;
+  if (P.size() >= (size_t(1) << 30)) return Error{"too many probes (2^30 or more)"};
   std::vector<dvec3> pts(reps.size());
   for (size_t i = 0; i < reps.size(); ++i) pts[i] = dvec3(P[reps[i]]);
   Result<detail::Tetrahedralization> raw = settings.backend == DelaunayBackend::TetGen
@@ -249,55 +270,87 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
                                                : detail::cgalDelaunay3(pts);
   if (!raw) return Error{raw.error()};
   ProbeSet s = emptySet(ctx, 3);
-  // Pass 1, in the backend's order and in place: each tetrahedron's probes sorted, then the
-  // last two swapped if that makes the orientation positive, its backend neighbours following
-  // their vertices to the new slots; its curve key; flat ones marked (probe -1) and left out.
-  detail::Tets& tets = raw->tets;
-  detail::Tets& backendNeighbours = raw->neighbours;
+  // The backend's vertices, in its order: their probes and positions (read per tetrahedron
+  // below; in the backend's spatial order they stay in cache, in the caller's they would not).
+  const size_t vertexCount = raw->vertices.empty() ? pts.size() : raw->vertices.size();
+  std::vector<int32_t> probeOf(vertexCount);
+  std::vector<glm::vec3> Q(vertexCount);
+  for (size_t j = 0; j < vertexCount; ++j) {
+    probeOf[j] = reps[raw->vertices.empty() ? j : size_t(raw->vertices[j])];
+    Q[j] = P[size_t(probeOf[j])];
+  }
+  // Pass 1, in the backend's order and in place: each tetrahedron's vertices sorted by probe
+  // index, then the last two swapped if that makes the orientation positive, its backend
+  // neighbours following their vertices to the new slots; its curve key; flat ones marked
+  // (vertex -1) and left out. The records keep backend vertex numbers.
+  std::vector<detail::BackendTet>& tets = raw->tets;
   std::vector<uint64_t> words;
   words.reserve(tets.size());
   const CurveKeys curve(lo, hi);
   int flat = 0;
   size_t hullFaces = 0;
   for (size_t r = 0; r < tets.size(); ++r) {
-    std::array<int32_t, 4>& t = tets[r];
-    int32_t v[4] = {reps[size_t(t[0])], reps[size_t(t[1])], reps[size_t(t[2])],
-                    reps[size_t(t[3])]};
-    int slot[4] = {0, 1, 2, 3};
-    for (int i = 1; i < 4; ++i) {  // insertion sort, carrying the slots along
-      for (int j = i; j > 0 && v[j - 1] > v[j]; --j) {
-        std::swap(v[j - 1], v[j]);
-        std::swap(slot[j - 1], slot[j]);
+    detail::BackendTet& t = tets[r];
+    // Probe index and slot in one word (indices < 2^30, checked by the caller), sorted by a
+    // network of five compare-exchanges (min / max, no branches on the data).
+    uint32_t w[4];
+    for (int k = 0; k < 4; ++k) w[k] = uint32_t(probeOf[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
+    auto exchange = [&](int i, int j) {
+      const uint32_t a = std::min(w[i], w[j]), b = std::max(w[i], w[j]);
+      w[i] = a;
+      w[j] = b;
+    };
+    exchange(0, 1);
+    exchange(2, 3);
+    exchange(0, 2);
+    exchange(1, 3);
+    exchange(1, 2);
+    int32_t v[4];  // backend vertex numbers, in probe order
+    int slot[4];
+    for (int k = 0; k < 4; ++k) {
+      slot[k] = int(w[k] & 3);
+      v[k] = t.v[size_t(slot[k])];
+    }
+    const glm::vec3 a = Q[size_t(v[0])], b = Q[size_t(v[1])], c = Q[size_t(v[2])],
+                    d = Q[size_t(v[3])];
+    bool negative;
+    if (raw->positive) {
+      // The sorted order is the backend's permuted by `slot`: an odd permutation of a
+      // positive tetrahedron is negative (as orient3d would say, without its arithmetic).
+      const int inversions = int(slot[0] > slot[1]) + int(slot[0] > slot[2]) +
+                             int(slot[0] > slot[3]) + int(slot[1] > slot[2]) +
+                             int(slot[1] > slot[3]) + int(slot[2] > slot[3]);
+      negative = (inversions & 1) != 0;
+    } else {
+      const double o = orient3d(a, b, c, d);
+      if (o == 0.0) {
+        ++flat;
+        t.v[0] = -1;
+        continue;
       }
+      negative = o < 0.0;
     }
-    const glm::vec3 a = P[size_t(v[0])], b = P[size_t(v[1])], c = P[size_t(v[2])],
-                    d = P[size_t(v[3])];
-    const double o = orient3d(a, b, c, d);
-    if (o == 0.0) {
-      ++flat;
-      t[0] = -1;
-      continue;
-    }
-    if (o < 0.0) {  // an odd permutation makes it positive
+    if (negative) {  // an odd permutation makes it positive
       std::swap(v[2], v[3]);
       std::swap(slot[2], slot[3]);
     }
-    t = {v[0], v[1], v[2], v[3]};
-    std::array<int32_t, 4>& n = backendNeighbours[r];
+    t.v = {v[0], v[1], v[2], v[3]};
+    std::array<int32_t, 4>& n = t.n;
     n = {n[size_t(slot[0])], n[size_t(slot[1])], n[size_t(slot[2])], n[size_t(slot[3])]};
     hullFaces += size_t(n[0] < 0) + size_t(n[1] < 0) + size_t(n[2] < 0) + size_t(n[3] < 0);
     words.push_back((uint64_t(curve.of(a, b, c, d)) << 32) | r);
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
   if (words.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  const std::vector<int32_t> order = curveOrder(words, tets);
+  const std::vector<int32_t> order = curveOrder(words, tets, probeOf);
   std::vector<uint64_t>().swap(words);
   const int32_t inner = int32_t(order.size());
 
   // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
-  // then faces are matched instead), the hull faces (no tetrahedron beyond) and the walk
-  // records.
+  // then faces are matched instead), the hull faces (no tetrahedron beyond), the walk
+  // records, and the seed grid's candidates (each cell offered as buildProbeSeedGrid would, in
+  // the same order).
   auto face = [&](int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
@@ -306,7 +359,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     std::sort(f.begin(), f.end());
     return FaceRef{f, c, k};
   };
-  std::vector<int32_t> used(P.size(), 0);
+  std::vector<int32_t> used(vertexCount, 0);  // per backend vertex
   std::vector<FaceRef> hull;
   s.cells.reserve(size_t(inner) + hullFaces);
   s.neighbours.reserve(size_t(inner) + hullFaces);
@@ -315,44 +368,44 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
     hull.reserve(hullFaces);
     s.walk.reserve(size_t(inner));
+    runtime_detail::SeedGridBuilder grid(s.positions, 3, inner, settings.cellsPerSeed);
     for (int32_t i = 0; i < inner; ++i) {
-      // The backend's arrays are read in the new order, scattered over 20 MB: fetch a row
-      // kAhead cells ahead, and the renumbering entries of its neighbours half as far ahead
-      // (by then that row has arrived), so that the misses overlap.
+      // The backend's records are read in the new order, scattered over 20 MB: fetch the
+      // record kAhead cells ahead, and the renumbering entries of its neighbours half as far
+      // ahead (by then that record has arrived), so that the misses overlap.
       constexpr int32_t kAhead = 16;
-      if (i + kAhead < inner) {
-        const size_t ahead = size_t(order[size_t(i + kAhead)]);
-        prefetch(&tets[ahead]);
-        prefetch(&backendNeighbours[ahead]);
-      }
+      if (i + kAhead < inner) prefetch(&tets[size_t(order[size_t(i + kAhead)])]);
       if (i + kAhead / 2 < inner) {
-        for (int32_t n : backendNeighbours[size_t(order[size_t(i + kAhead / 2)])]) {
+        for (int32_t n : tets[size_t(order[size_t(i + kAhead / 2)])].n) {
           if (n >= 0) prefetch(&newIndex[size_t(n)]);
         }
       }
-      const size_t r = size_t(order[size_t(i)]);
-      const std::array<int32_t, 4>& t = tets[r];
-      const std::array<int32_t, 4>& n = backendNeighbours[r];
-      const glm::ivec4 cell(t[0], t[1], t[2], t[3]);
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
+      const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                            probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
       glm::ivec4 links(-1);
       s.cells.push_back(cell);
       for (int k = 0; k < 4; ++k) {
-        used[size_t(t[size_t(k)])] = 1;
-        if (n[size_t(k)] >= 0) {
-          links[k] = newIndex[size_t(n[size_t(k)])];
+        used[size_t(t.v[size_t(k)])] = 1;
+        if (t.n[size_t(k)] >= 0) {
+          links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
           hull.push_back(face(i, k));
         }
       }
       s.neighbours.push_back(links);
-      makeProbeWalkCell({P[size_t(t[0])], P[size_t(t[1])], P[size_t(t[2])], P[size_t(t[3])]},
-                        s.walk.emplace_back());
+      const glm::vec3 a = Q[size_t(t.v[0])], b = Q[size_t(t.v[1])], c = Q[size_t(t.v[2])],
+                      d = Q[size_t(t.v[3])];
+      makeProbeWalkCell({a, b, c, d}, s.walk.emplace_back());
+      grid.offer(i, a + b + c + d);
     }
+    s.grid = grid.finish();
   } else {
     for (int32_t i = 0; i < inner; ++i) {
-      const std::array<int32_t, 4>& t = tets[size_t(order[size_t(i)])];
-      s.cells.push_back(glm::ivec4(t[0], t[1], t[2], t[3]));
-      for (int k = 0; k < 4; ++k) used[size_t(t[size_t(k)])] = 1;
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
+      s.cells.push_back(glm::ivec4(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                                   probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]));
+      for (int k = 0; k < 4; ++k) used[size_t(t.v[size_t(k)])] = 1;
     }
     s.neighbours.assign(size_t(inner), glm::ivec4(-1));
     std::vector<FaceRef> refs;
@@ -364,10 +417,11 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     if (!open) return Error{open.error()};
     hull = std::move(open).value();
   }
-  detail::Tets().swap(tets);  // the backend's arrays are no longer needed
-  detail::Tets().swap(backendNeighbours);
-  int unused = 0;
-  for (int32_t r : reps) unused += used[size_t(r)] ? 0 : 1;
+  std::vector<detail::BackendTet>().swap(tets);  // the backend's records are no longer needed
+  // Every backend vertex is a distinct representative probe, so the unused ones are the
+  // representatives minus the vertices some tetrahedron has.
+  int unused = int(reps.size());
+  for (int32_t u : used) unused -= u;
   if (unused > 0) {
     ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
   }
@@ -674,7 +728,8 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.dimension != 3 || set.walk.size() != size_t(set.innerCellCount)) {
     prepareProbeLookup(set);
   }
-  buildProbeSeedGrid(set, settings.cellsPerSeed);
+  // build3 offers its cells to the seed grid in its pass over them (unless it matched faces).
+  if (set.grid.seeds.empty()) buildProbeSeedGrid(set, settings.cellsPerSeed);
   Status st = validateProbeSet(set, "buildProbeTopology");
   if (!st) return Error{st.error()};
   return set;

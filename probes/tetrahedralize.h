@@ -29,12 +29,14 @@ namespace kiln {
 enum class DelaunayBackend { TetGen, Cgal };
 
 struct ProbeTopologySettings {
-  // TetGen by default. CGAL is faster (100k random probes: whole build 0.68 s vs 0.74 s) and
-  // gives the same cells in general position, but another valid split of cospherical probes
-  // (grids); the wall tests pass with both, chart_test's thin-wall leak ratio (< 0.1 of the
-  // bound) not with CGAL's split of two_rooms_thin's scene probes (0.22; TetGen's 3e-15, in
-  // the scene's probe order and in both lexicographic orders). TetGen is AGPLv3 and only ever
-  // linked into the bake tools, never kiln_runtime.
+  // TetGen by default. CGAL is faster and gives the same cells in general position, but
+  // another valid split of cospherical probes (grids); the wall tests pass with both,
+  // chart_test's thin-wall leak ratio (< 0.1 of the bound) not with CGAL's split of
+  // two_rooms_thin's scene probes (0.22; TetGen's 3e-15). The cause is the visibility test at
+  // a silhouette (a cell pairs a point behind the wall with a probe whose map footprint mixes
+  // wall and doorway texels; gone at 48 x 48 maps), which any split can hit: docs/probes.md,
+  // "Delaunay backends". TetGen is AGPLv3 and only ever linked into the bake tools, never
+  // kiln_runtime.
   DelaunayBackend backend = DelaunayBackend::TetGen;
   // Probes closer than this fraction of the bounds diagonal are merged.
   double mergeTolerance = 1e-6;

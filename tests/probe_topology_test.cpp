@@ -144,6 +144,27 @@ TEST(ProbeTopology, CellsArePositiveAndLinkedBothWays) {
   }
 }
 
+TEST(ProbeTopology, SeedGridOfTheBuildPassEqualsARebuild) {
+  // The build offers each cell to the seed grid in its pass over the cells; the grid must be
+  // the one buildProbeSeedGrid makes from the finished cells (random and grid probes).
+  std::vector<glm::vec3> grid;
+  for (int z = 0; z < 6; ++z)
+    for (int y = 0; y < 5; ++y)
+      for (int x = 0; x < 7; ++x) grid.emplace_back(x, 0.5f * y, 2.0f * z);
+  for (const auto& pts : {randomPoints(3000, 11), grid}) {
+    for (DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal}) {
+      const ProbeSet s = build(pts, backend);
+      ProbeSet rebuilt = s;
+      buildProbeSeedGrid(rebuilt, ProbeTopologySettings{}.cellsPerSeed);
+      EXPECT_EQ(s.grid.size, rebuilt.grid.size);
+      EXPECT_EQ(s.grid.min, rebuilt.grid.min);
+      EXPECT_EQ(s.grid.max, rebuilt.grid.max);
+      EXPECT_EQ(s.grid.seeds, rebuilt.grid.seeds);
+      EXPECT_GT(s.grid.seeds.size(), 100u);
+    }
+  }
+}
+
 TEST(ProbeTopology, GridProbesAreCosphericalButValid) {
   // Regular grids are the common case for probes and maximally degenerate for Delaunay.
   std::vector<glm::vec3> pts;

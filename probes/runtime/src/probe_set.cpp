@@ -13,6 +13,7 @@
 #include "binary_file.h"
 #include "kiln/probe_runtime.h"
 #include "prefetch.h"
+#include "seed_grid.h"
 
 namespace kiln {
 
@@ -43,6 +44,25 @@ Error fail(std::string_view name, const std::string& what) {
 }
 
 bool finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// Whether none of `count` floats is an infinity or a NaN (exponent bits all set), in one pass
+// that the compiler vectorises.
+bool allFiniteFloats(const float* values, size_t count) {
+  uint32_t bad = 0;
+  for (size_t i = 0; i < count; ++i) {
+    uint32_t bits;
+    std::memcpy(&bits, values + i, 4);
+    bad |= uint32_t((bits & 0x7f800000u) == 0x7f800000u);
+  }
+  return bad == 0;
+}
+
+// Whether every one of `count` floats is in [0, 1] (NaN is not), likewise.
+bool allInUnitInterval(const float* values, size_t count) {
+  bool ok = true;
+  for (size_t i = 0; i < count; ++i) ok &= values[i] >= 0.0f && values[i] <= 1.0f;
+  return ok;
+}
 
 // Number of vertex slots a cell uses, by dimension and kind.
 int usedSlots(int dimension, bool outer) {
@@ -316,62 +336,62 @@ void computeOuterCellCubics(ProbeSet& set) {
 // centroid falls in it, the one whose centroid is nearest its centre; grid cells that no
 // centroid falls in take the seed of the nearest grid cell that has one (a breadth-first
 // sweep over the grid). A query then starts within about a grid cell of its point.
-void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
-  set.grid = ProbeSeedGrid{};
-  if (set.dimension < 2 || set.innerCellCount <= 0) return;
-  const int corners = set.dimension == 3 ? 4 : 3;
+namespace runtime_detail {
+
+SeedGridBuilder::SeedGridBuilder(const std::vector<glm::vec3>& positions, int dimension,
+                                 int32_t innerCellCount, int targetCellsPerSeed) {
+  if (dimension < 2 || innerCellCount <= 0) return;
+  active_ = true;
+  inv_ = dimension == 3 ? 0.25f : 1.0f / 3.0f;
   // The bounds of every probe (a sequential pass; a merged or dropped probe only widens them
   // by a hair, and lookups clamp to the grid anyway).
   glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-lo);
-  for (const glm::vec3& p : set.positions) {
+  for (const glm::vec3& p : positions) {
     lo = glm::min(lo, p);
     hi = glm::max(hi, p);
   }
   const glm::dvec3 ext = glm::dvec3(hi) - glm::dvec3(lo);
   const double diag = glm::length(ext);
   const glm::dvec3 e = glm::max(ext, glm::dvec3(1e-3 * diag + 1e-30));
-  const double target = std::max(1.0, double(set.innerCellCount) / std::max(1, targetCellsPerSeed));
+  const double target = std::max(1.0, double(innerCellCount) / std::max(1, targetCellsPerSeed));
   const double k = std::cbrt(target / (e.x * e.y * e.z));
   for (int a = 0; a < 3; ++a) {
-    set.grid.size[a] = std::clamp(int(std::lround(e[a] * k)), 1, kSeedGridMaxAxis);
+    grid_.size[a] = std::clamp(int(std::lround(e[a] * k)), 1, kSeedGridMaxAxis);
   }
-  set.grid.min = lo;
-  set.grid.max = hi;
-  const glm::ivec3 n = set.grid.size;
+  grid_.min = lo;
+  grid_.max = hi;
+  const glm::ivec3 n = grid_.size;
   const size_t count = size_t(n.x) * size_t(n.y) * size_t(n.z);
-  std::vector<int32_t> seeds(count, -1);
-  std::vector<float> best(count, std::numeric_limits<float>::infinity());
+  grid_.seeds.assign(count, -1);
+  best_.assign(count, std::numeric_limits<float>::infinity());
   // Grid coordinates of a point: (p - lo) * scale, the grid cell its integer part.
-  glm::vec3 scale;
-  for (int a = 0; a < 3; ++a) scale[a] = hi[a] > lo[a] ? float(n[a]) / (hi[a] - lo[a]) : 0.0f;
-  const float inv = 1.0f / float(corners);
-  for (int32_t c = 0; c < set.innerCellCount; ++c) {
-    const glm::ivec4 t = set.cells[size_t(c)];
-    glm::vec3 centroid = set.positions[size_t(t[0])] + set.positions[size_t(t[1])] +
-                         set.positions[size_t(t[2])];
-    if (corners == 4) centroid += set.positions[size_t(t[3])];
-    const glm::vec3 f = (centroid * inv - lo) * scale;
-    const glm::ivec3 g = glm::clamp(glm::ivec3(f), glm::ivec3(0), n - 1);
-    const glm::vec3 d = f - (glm::vec3(g) + 0.5f);
-    const float d2 = glm::dot(d, d);
-    const size_t i = size_t(g.x) + size_t(n.x) * (size_t(g.y) + size_t(n.y) * size_t(g.z));
-    if (d2 < best[i]) {
-      best[i] = d2;
-      seeds[i] = c;
-    }
-  }
+  lo_ = lo;
+  for (int a = 0; a < 3; ++a) scale_[a] = hi[a] > lo[a] ? float(n[a]) / (hi[a] - lo[a]) : 0.0f;
+}
+
+ProbeSeedGrid SeedGridBuilder::finish() {
+  if (!active_) return ProbeSeedGrid{};
+  std::vector<int32_t>& seeds = grid_.seeds;
+  const glm::ivec3 n = grid_.size;
+  const size_t count = seeds.size();
   // Breadth-first from the grid cells that have a seed: each empty one takes the seed of the
-  // neighbour that reaches it first.
+  // neighbour that reaches it first. The queue holds grid coordinates packed in 10 bits each
+  // (kSeedGridMaxAxis <= 1024), so that a visit needs no division to find them.
+  static_assert(kSeedGridMaxAxis <= 1024);
   std::vector<uint32_t> queue;
   queue.reserve(count);
-  for (size_t i = 0; i < count; ++i) {
-    if (seeds[i] >= 0) queue.push_back(uint32_t(i));
+  for (int z = 0, i = 0; z < n.z; ++z) {
+    for (int y = 0; y < n.y; ++y) {
+      for (int x = 0; x < n.x; ++x, ++i) {
+        if (seeds[size_t(i)] >= 0) queue.push_back(uint32_t(x | y << 10 | z << 20));
+      }
+    }
   }
   const size_t stride[3] = {1, size_t(n.x), size_t(n.x) * size_t(n.y)};
   for (size_t head = 0; head < queue.size(); ++head) {
-    const size_t i = queue[head];
-    const glm::ivec3 g(int(i % size_t(n.x)), int((i / stride[1]) % size_t(n.y)),
-                       int(i / stride[2]));
+    const uint32_t packed = queue[head];
+    const glm::ivec3 g(int(packed & 1023), int((packed >> 10) & 1023), int(packed >> 20));
+    const size_t i = size_t(g.x) + stride[1] * size_t(g.y) + stride[2] * size_t(g.z);
     for (int a = 0; a < 3; ++a) {
       for (int side = -1; side <= 1; side += 2) {
         const int x = g[a] + side;
@@ -379,12 +399,32 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
         const size_t j = side < 0 ? i - stride[a] : i + stride[a];
         if (seeds[j] < 0) {
           seeds[j] = seeds[i];
-          queue.push_back(uint32_t(j));
+          queue.push_back(packed + (side < 0 ? 0u - (1u << (10 * a)) : 1u << (10 * a)));
         }
       }
     }
   }
-  set.grid.seeds = std::move(seeds);
+  std::vector<float>().swap(best_);
+  active_ = false;
+  return std::move(grid_);
+}
+
+}  // namespace runtime_detail
+
+void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed) {
+  runtime_detail::SeedGridBuilder grid(set.positions, set.dimension, set.innerCellCount,
+                                       targetCellsPerSeed);
+  if (grid.active()) {
+    const bool tet = set.dimension == 3;
+    for (int32_t c = 0; c < set.innerCellCount; ++c) {
+      const glm::ivec4 t = set.cells[size_t(c)];
+      glm::vec3 sum = set.positions[size_t(t[0])] + set.positions[size_t(t[1])] +
+                      set.positions[size_t(t[2])];
+      if (tet) sum += set.positions[size_t(t[3])];
+      grid.offer(c, sum);
+    }
+  }
+  set.grid = grid.finish();
 }
 
 Status validateProbeSet(const ProbeSet& s, std::string_view name) {
@@ -416,7 +456,15 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
                           " has no outer cells");
   }
   if (s.outerCells.size() != outer) return fail(name, "outerCells: size differs from cells");
-  for (size_t i = 0; i < np; ++i) {
+  // Positions, validity and SH are checked first as flat float arrays without branches (a
+  // 100k-probe set has 10M of them); only when one is not finite does the loop below run, to
+  // name it.
+  const bool allFinite =
+      allFiniteFloats(&s.positions[0].x, 3 * np) && allFiniteFloats(s.validity.data(), np) &&
+      allFiniteFloats(&s.sh[0].c[0].x, size_t(3 * kShL2Count) * np);
+  const bool occlusionValid =
+      s.occlusion.empty() || allInUnitInterval(&s.occlusion[0].x, 4 * np);
+  for (size_t i = 0; i < np && !(allFinite && occlusionValid); ++i) {
     if (!finite(s.positions[i])) return fail(name, "positions[" + std::to_string(i) + "]: not finite");
     if (!std::isfinite(s.validity[i])) {
       return fail(name, "validity[" + std::to_string(i) + "]: not finite");
