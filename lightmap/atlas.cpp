@@ -3,12 +3,16 @@
 #include "lightmap/atlas.h"
 
 #include <algorithm>
+#include <array>
+#include <climits>
 #include <cmath>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "lightmap/chart_packer.h"
 #include "lightmap/manifest.h"
+#include "lightmap/uv_unwrap.h"
 #include "lightmap/skyline_packer.h"
 #include "src/progress.h"
 
@@ -38,6 +42,14 @@ AreaPair areas(const Object& o) {
     a.world += 0.5 * glm::length(glm::cross(p1 - p0, p2 - p0));
   }
   return a;
+}
+
+// Texels per UV1 unit of an object whose UV1 bounding rectangle has extent (eu, ev): `k`,
+// scaled down when the rectangle's longer side would exceed `limit` texels.
+double texelsPerUv(double k, double eu, double ev, int limit) {
+  if (std::max(texelsUp(k * eu), texelsUp(k * ev)) > limit)
+    k *= double(limit) / std::max(k * eu, k * ev);
+  return k;
 }
 
 // Page sides are multiples of this (block-compressed formats such as BC6H and ASTC 4x4 need
@@ -121,6 +133,49 @@ vec4 scaleOffsetFor(vec2 lo, vec2 hi, glm::ivec2 texelMin, glm::ivec2 texelSize,
   return vec4(float(sx), float(sy), float(ox), float(oy));
 }
 
+// The texels an object covers in its texel rectangle of `size`: its UV1 triangles mapped as
+// scaleOffsetFor maps them (chart_packer.h footprintInFrame).
+ChartFootprint objectFootprint(const Object& o, std::pair<vec2, vec2> bounds, glm::ivec2 size) {
+  const glm::dvec2 lo(bounds.first), hi(bounds.second);
+  const glm::dvec2 scale = (glm::dvec2(size) - 2.0 * kInset) / (hi - lo);
+  std::vector<std::array<glm::dvec2, 3>> triangles(o.triangles.size());
+  for (size_t t = 0; t < o.triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k)
+      triangles[t][size_t(k)] = (glm::dvec2(o.uv1[o.triangles[t][k]]) - lo) * scale + kInset;
+  return footprintInFrame(triangles, size);
+}
+
+// The page's objects packed by their shape (chart_packer.h: each object's covered texels per
+// column, dropped where its top ends lowest, upright only since one scale and offset cannot
+// turn it) with `padding` empty texels between the covered texels of two objects and to the
+// page's border. An L-shaped or ragged object (charts packed by shape leave a ragged top)
+// lends its hollows to the next ones, which rectangles cannot. nullopt when no packing fits
+// maxSize; else the page and each member's rectangle corner.
+std::optional<std::pair<glm::ivec2, std::vector<glm::ivec2>>> shapePage(
+    int maxSize, int padding, const std::vector<uint32_t>& members,
+    const std::vector<ChartFootprint>& footprints) {
+  auto align = [&](int x) { return (x + kPageAlign - 1) / kPageAlign * kPageAlign; };
+  std::vector<ChartFootprint> shapes;
+  for (uint32_t i : members) shapes.push_back(footprints[i]);
+  ChartPackOptions options;
+  options.rigid.assign(shapes.size(), true);
+  options.maxWidth = maxSize - 2 * padding;
+  auto pageOf = [&](int w, int h) {
+    return glm::ivec2(std::min(maxSize, align(w + 2 * padding)),
+                      std::min(maxSize, align(h + 2 * padding)));
+  };
+  options.cost = [&](int w, int h) -> int64_t {
+    if (h + 2 * padding > maxSize) return INT64_MAX;
+    const glm::ivec2 page = pageOf(w, h);
+    return int64_t(page.x) * page.y;
+  };
+  const ChartPacking packed = packCharts(shapes, {}, padding, options);
+  if (packed.size.x <= 0 || packed.size.y + 2 * padding > maxSize) return std::nullopt;
+  std::vector<glm::ivec2> corners(members.size());
+  for (size_t m = 0; m < members.size(); ++m) corners[m] = packed.corners[m] + glm::ivec2(padding);
+  return std::make_pair(pageOf(packed.size.x, packed.size.y), corners);
+}
+
 }  // namespace
 
 bool isLightmapped(const Object& object) {
@@ -135,8 +190,22 @@ double lightmapTexels(const Object& object, float resolution) {
   return density * density * area;
 }
 
-bool tooSmallForLightmap(const Object& object, float resolution, float minTexels) {
-  return minTexels > 0.0f && lightmapTexels(object, resolution) < double(minTexels);
+double lightmappedArea(const Scene& scene) {
+  double area = 0.0;
+  for (const Object& o : scene.objects)
+    if (isLightmapped(o))
+      for (uint32_t t = 0; t < o.triangles.size(); ++t) area += o.triangleArea(t);
+  return area;
+}
+
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels,
+                         double sceneArea) {
+  const double texels = lightmapTexels(object, resolution);
+  if (minTexels >= 0.0f) return minTexels > 0.0f && texels < double(minTexels);
+  const double density = double(resolution) * object.settings.scaleInLightmap;
+  return object.uv1.size() != object.positions.size() &&
+         texels < double(kAutoObjectTexelsPerUnit) * resolution &&
+         texels / (density * density) < kAutoObjectAreaShare * sceneArea;
 }
 
 std::pair<vec2, vec2> uv1Bounds(const Object& object) {
@@ -166,8 +235,8 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   if (!(settings.resolution > 0.0f) || !std::isfinite(settings.resolution))
     return Error{"lightmap resolution must be > 0 texels per unit (got " +
                  std::to_string(settings.resolution) + ")"};
-  if (!(settings.minObjectTexels >= 0.0f) || !std::isfinite(settings.minObjectTexels))
-    return Error{"minObjectTexels must be a finite number >= 0 (got " +
+  if (!std::isfinite(settings.minObjectTexels))
+    return Error{"minObjectTexels must be a finite number (got " +
                  std::to_string(settings.minObjectTexels) + ")"};
   if (settings.maxSize < 1 + 2 * p)
     return Error{"lightmap maxSize " + std::to_string(settings.maxSize) +
@@ -202,10 +271,11 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   std::vector<glm::ivec2> sizes(scene.objects.size(), glm::ivec2(0));
   std::vector<std::pair<vec2, vec2>> bounds(scene.objects.size());
   std::vector<std::string> probeLit;
+  const double sceneArea = lightmappedArea(scene);
   for (uint32_t i = 0; i < scene.objects.size(); ++i) {
     const Object& o = scene.objects[i];
     if (!isLightmapped(o)) continue;
-    if (tooSmallForLightmap(o, settings.resolution, settings.minObjectTexels)) {
+    if (tooSmallForLightmap(o, settings.resolution, settings.minObjectTexels, sceneArea)) {
       layout.objects[i].probeLit = true;
       probeLit.push_back("'" + o.name + "'");
       continue;
@@ -221,12 +291,11 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     const double density = double(settings.resolution) * o.settings.scaleInLightmap;
     const bool generated = i < settings.worldPerUv.size() && settings.worldPerUv[i] > 0.0;
     const double worldPerUv = generated ? settings.worldPerUv[i] : std::sqrt(a.world / a.uv);
-    double k = density * worldPerUv;
     const double eu = double(hi.x) - lo.x, ev = double(hi.y) - lo.y;
+    const double k = texelsPerUv(density * worldPerUv, eu, ev, limit);
     glm::ivec2 size(texelsUp(k * eu), texelsUp(k * ev));
-    if (std::max(size.x, size.y) > limit) {
-      k *= double(limit) / std::max(k * eu, k * ev);
-      size = glm::min(glm::ivec2(texelsUp(k * eu), texelsUp(k * ev)), glm::ivec2(limit));
+    if (k != density * worldPerUv) {
+      size = glm::min(size, glm::ivec2(limit));
       std::ostringstream w;
       w << describe(o) << ": lightmap scaled down to " << size.x << " x " << size.y
         << " texels to fit maxSize " << settings.maxSize << " with padding " << p << " ("
@@ -241,9 +310,14 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
 
   if (!probeLit.empty()) {
     std::ostringstream w;
-    w << probeLit.size() << " object(s) would get fewer than " << settings.minObjectTexels
-      << " lightmap texels at " << settings.resolution
-      << " texels per unit and are lit by probes instead (manifest: \"probeLit\"): ";
+    w << probeLit.size() << " object(s) would get fewer than ";
+    if (settings.minObjectTexels >= 0.0f)
+      w << settings.minObjectTexels;
+    else
+      w << kAutoObjectTexelsPerUnit * settings.resolution;
+    w << " lightmap texels at " << settings.resolution
+      << " texels per unit and are lit by probes instead (manifest: \"probeLit\"; "
+      << "--min-object-texels 0 gives every object a lightmap): ";
     const size_t shown = std::min<size_t>(probeLit.size(), 20);
     for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << probeLit[k];
     if (shown < probeLit.size()) w << " and " << probeLit.size() - shown << " more";
@@ -268,6 +342,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   std::vector<uint32_t> remaining;
   for (uint32_t j : packingOrder(sortKey)) remaining.push_back(lightmapped[j]);
   std::vector<glm::ivec2> corners(scene.objects.size());
+  std::vector<ChartFootprint> footprints(scene.objects.size());
   Progress progress("atlas", lightmapped.size(), "objects",
                     settings.showProgress && !lightmapped.empty());
   while (!remaining.empty()) {
@@ -282,10 +357,21 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     }
     if (members.empty())  // cannot happen: sizes are clamped to fit an empty page
       return Error{describe(scene.objects[remaining.front()]) + ": does not fit a lightmap page"};
-    const glm::ivec2 best = smallestPage(settings.maxSize, p, members, sizes);
+    glm::ivec2 best = smallestPage(settings.maxSize, p, members, sizes);
     const bool packed = packPage(best, p, members, sizes, corners);
     assert(packed);  // smallestPage found it by this very packing (or maxSize, which holds all)
     (void)packed;
+    // Shapes instead of rectangles, when that gives a smaller page.
+    if (members.size() > 1) {
+      for (uint32_t i : members)
+        if (footprints[i].columns == 0)
+          footprints[i] = objectFootprint(scene.objects[i], bounds[i], sizes[i]);
+      if (const auto shaped = shapePage(settings.maxSize, p, members, footprints);
+          shaped && int64_t(shaped->first.x) * shaped->first.y < int64_t(best.x) * best.y) {
+        best = shaped->first;
+        for (size_t m = 0; m < members.size(); ++m) corners[members[m]] = shaped->second[m];
+      }
+    }
     AtlasPage page{best.x, best.y};
     const int index = int(layout.pages.size());
     layout.pages.push_back(page);
@@ -304,6 +390,169 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   if (Status budget = checkTexelBudget(layout.pages, "lightmap pages"); !budget)
     return Error{budget.error()};
   return layout;
+}
+
+Status packChartsIntoPages(Scene& scene, AtlasLayout& layout, const AtlasSettings& settings,
+                           std::vector<std::optional<UnwrapResult>>& unwraps) {
+  const int p = settings.padding, gutter = std::max(1, p);
+  const int limit = settings.maxSize - 2 * p;
+  auto align = [&](int x) { return (x + kPageAlign - 1) / kPageAlign * kPageAlign; };
+  auto generated = [&](uint32_t i) {
+    return i < unwraps.size() && unwraps[i].has_value() &&
+           unwraps[i]->uv1.size() == scene.objects[i].uv1.size();
+  };
+  const vec4 identity(1.0f, 1.0f, 0.0f, 0.0f);
+  for (int page = 0; page < int(layout.pages.size()); ++page) {
+    if (settings.cancel && settings.cancel->load()) return Error{"cancelled"};
+    std::vector<uint32_t> members;
+    bool anyGenerated = false, allIdentity = true;
+    for (uint32_t i = 0; i < layout.objects.size(); ++i) {
+      if (layout.objects[i].lightmapIndex != page) continue;
+      members.push_back(i);
+      if (!generated(i)) continue;
+      anyGenerated = true;
+      allIdentity = allIdentity && layout.objects[i].scaleOffset == identity;
+    }
+    // A locked page is chart-packed when its generated objects have identity scaleOffsets
+    // (packAtlas's rectangles never do: they are inset).
+    if (!anyGenerated || (settings.locked && !allIdentity)) continue;
+
+    // One item per chart of a generated object (triangles in texels at the object's density,
+    // moved to the origin), one rigid item per other object (its footprint in its rectangle).
+    struct Item {
+      uint32_t object = 0;
+      uint32_t chart = 0;  // generated objects: UnwrapResult::triangleChart
+      glm::dvec2 min{0.0}, extent{0.0};
+    };
+    std::vector<Item> items;
+    std::vector<ChartFootprint> upright, quarter;
+    std::vector<bool> rigid;
+    std::map<std::pair<uint32_t, uint32_t>, size_t> itemOf;  // (object, chart) -> item
+    std::vector<double> scale(layout.objects.size(), 0.0);
+    for (uint32_t i : members) {
+      const Object& o = scene.objects[i];
+      const auto bounds = uv1Bounds(o);
+      if (!generated(i)) {
+        items.push_back({i, 0, glm::dvec2(0.0), glm::dvec2(layout.objects[i].texelSize)});
+        upright.push_back(objectFootprint(o, bounds, layout.objects[i].texelSize));
+        quarter.push_back(upright.back());
+        rigid.push_back(true);
+        continue;
+      }
+      const UnwrapResult& u = *unwraps[i];
+      const double density = double(settings.resolution) * o.settings.scaleInLightmap;
+      scale[i] = texelsPerUv(density * u.worldPerUv, double(bounds.second.x) - bounds.first.x,
+                             double(bounds.second.y) - bounds.first.y, limit);
+      std::map<uint32_t, std::vector<std::array<glm::dvec2, 3>>> charts;
+      for (uint32_t t = 0; t < o.triangles.size(); ++t) {
+        if (u.triangleChart[t] >= uint32_t(u.stats.chartCount)) continue;  // degenerate
+        std::array<glm::dvec2, 3> tri;
+        for (int k = 0; k < 3; ++k)
+          tri[size_t(k)] = glm::dvec2(o.uv1[o.triangles[t][k]]) * scale[i];
+        charts[u.triangleChart[t]].push_back(tri);
+      }
+      for (auto& [chart, tris] : charts) {
+        Item item{i, chart, glm::dvec2(1e300), glm::dvec2(0.0)};
+        glm::dvec2 hi(-1e300);
+        for (const auto& tri : tris)
+          for (const glm::dvec2& q : tri) {
+            item.min = glm::min(item.min, q);
+            hi = glm::max(hi, q);
+          }
+        item.extent = hi - item.min;
+        for (auto& tri : tris)
+          for (glm::dvec2& q : tri) q -= item.min;
+        upright.push_back(chartFootprint(tris, item.extent));
+        for (auto& tri : tris)
+          for (glm::dvec2& q : tri) q = glm::dvec2(item.extent.y - q.y, q.x);
+        quarter.push_back(chartFootprint(tris, glm::dvec2(item.extent.y, item.extent.x)));
+        rigid.push_back(false);
+        itemOf[{i, chart}] = items.size();
+        items.push_back(item);
+      }
+    }
+    ChartPackOptions options;
+    options.rigid = rigid;
+    options.maxWidth = limit;
+    options.fromWidest = true;
+    auto pageOf = [&](int w, int h) {
+      return glm::ivec2(std::min(settings.maxSize, align(w + 2 * p)),
+                        std::min(settings.maxSize, align(h + 2 * p)));
+    };
+    options.cost = [&](int w, int h) -> int64_t {
+      if (h > limit) return INT64_MAX;
+      const glm::ivec2 size = pageOf(w, h);
+      return int64_t(size.x) * size.y;
+    };
+    const ChartPacking packed = packCharts(upright, quarter, gutter, options);
+    const AtlasPage before = layout.pages[size_t(page)];
+    const bool fits = packed.size.x > 0 && packed.size.y <= limit;
+    const glm::ivec2 size = fits ? pageOf(packed.size.x, packed.size.y) : glm::ivec2(0);
+    if (settings.locked) {
+      if (size != glm::ivec2(before.width, before.height))
+        return Error{"locked atlas: lightmap " + std::to_string(page) +
+                     "'s charts no longer pack into its " + std::to_string(before.width) +
+                     " x " + std::to_string(before.height) +
+                     " texels (did the geometry, its lights or the atlas settings change?)"};
+    } else if (!fits || int64_t(size.x) * size.y >= int64_t(before.width) * before.height) {
+      continue;  // the objects' rectangles packed it as well
+    }
+    const AtlasPage after{size.x, size.y};
+    // Where a point of item j (texels relative to the item's min) lands in the page:
+    // turned as the packer chose (rotations: the orientation is kept), as uv_unwrap.cpp does.
+    auto pagePoint = [&](size_t j, glm::dvec2 q) {
+      const Item& item = items[j];
+      if (packed.quarter[j]) q = glm::dvec2(item.extent.y - q.y, q.x);
+      const ChartFootprint& f = packed.quarter[j] ? quarter[j] : upright[j];
+      q += f.offset;
+      return glm::dvec2(packed.corners[j] + glm::ivec2(p)) +
+             (packed.turned[j] ? glm::dvec2(f.columns, f.rows) - q : q);
+    };
+    for (size_t j = 0; j < items.size(); ++j) {
+      if (!rigid[j]) continue;
+      AtlasObject& ao = layout.objects[items[j].object];
+      const glm::ivec2 corner = packed.corners[j] + glm::ivec2(p);
+      if (settings.locked && corner != ao.texelMin)
+        return Error{"locked atlas: " + describe(scene.objects[items[j].object]) +
+                     " no longer packs where the manifest puts it"};
+      ao.texelMin = corner;
+      ao.scaleOffset = scaleOffsetFor(uv1Bounds(scene.objects[items[j].object]).first,
+                                      uv1Bounds(scene.objects[items[j].object]).second,
+                                      ao.texelMin, ao.texelSize, after);
+    }
+    for (uint32_t i : members) {
+      if (!generated(i)) continue;
+      Object& o = scene.objects[i];
+      UnwrapResult& u = *unwraps[i];
+      std::vector<vec2> uv(o.uv1.size(), vec2(-1.0f));
+      glm::dvec2 lo(1e300), hi(-1e300);
+      for (uint32_t t = 0; t < o.triangles.size(); ++t) {
+        const auto found = itemOf.find({i, u.triangleChart[t]});
+        if (found == itemOf.end()) continue;  // degenerate: below
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t v = o.triangles[t][k];
+          const glm::dvec2 q = pagePoint(
+              found->second, glm::dvec2(o.uv1[v]) * scale[i] - items[found->second].min);
+          lo = glm::min(lo, q);
+          hi = glm::max(hi, q);
+          uv[v] = vec2(q / glm::dvec2(after.width, after.height));
+        }
+      }
+      // Degenerate triangles (no area, no texels) collapse onto a point of the object.
+      const vec2 anchor = vec2(lo / glm::dvec2(after.width, after.height));
+      for (vec2& x : uv)
+        if (x.x < 0.0f) x = anchor;
+      o.uv1 = uv;
+      u.uv1 = uv;
+      AtlasObject& ao = layout.objects[i];
+      ao.scaleOffset = identity;
+      ao.texelMin = glm::ivec2(glm::floor(lo));
+      ao.texelSize = glm::ivec2(glm::ceil(hi)) - ao.texelMin;
+      ao.texelsPerUnit = float(scale[i] / u.worldPerUv);
+    }
+    layout.pages[size_t(page)] = after;
+  }
+  return Status::success();
 }
 
 nlohmann::json atlasToJson(const AtlasLayout& layout, const Scene& scene) {

@@ -26,7 +26,8 @@
 
 namespace kiln {
 
-struct Manifest;  // lightmap/manifest.h
+struct Manifest;      // lightmap/manifest.h
+struct UnwrapResult;  // lightmap/uv_unwrap.h
 
 struct AtlasPage {
   int width = 0, height = 0;  // texels
@@ -35,7 +36,9 @@ struct AtlasPage {
 // One scene object's place in the atlas. Index-aligned with Scene::objects.
 struct AtlasObject {
   int lightmapIndex = -1;  // page, or -1: no lightmap (not static, scale 0, or probe-lit)
-  glm::ivec2 texelMin{0};  // texel rectangle [min, min + size) in its page
+  // Texel rectangle [min, min + size) in its page, holding every texel of the object (other
+  // objects' rectangles may overlap it, their texels never: packAtlas, packChartsIntoPages).
+  glm::ivec2 texelMin{0};
   glm::ivec2 texelSize{0};
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // (sx, sy, ox, oy)
   // Texels per world unit the object actually got (below resolution x scale when clamped).
@@ -60,25 +63,39 @@ inline constexpr uint64_t kMaxLightmapTexels = uint64_t(1) << 27;
 Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what);
 
 // Default of AtlasSettings::minObjectTexels, UnwrapSettings::minObjectTexels and kiln bake's
-// --min-object-texels: 0, every lightmapped object gets a lightmap. Off by default because
-// one threshold does not fit every resolution (quick bakes at 2-8 texels per unit would lose
-// whole rooms); 64-128 suits bakes at 25-64 texels per unit, where a smaller lightmap holds
-// little more than the one colour the probes around the object give as well (with
-// direction), in charts of a texel or two that cost more gutter than they hold.
-inline constexpr float kMinObjectTexels = 0.0f;
+// --min-object-texels: negative = automatic (tooSmallForLightmap); 0 = every lightmapped
+// object gets a lightmap; N > 0 = objects under N texels are lit by probes.
+inline constexpr float kMinObjectTexels = -1.0f;
+
+// The automatic rule takes small props, as a Unity user sets Receive GI: Light Probes on
+// them: an object whose UVs kiln generates (no TEXCOORD_1: nobody made it a lightmap) whose
+// lightmap would get fewer than 5 x resolution texels (area under 5 / resolution: 0.2 m^2 at
+// 25 texels per unit, 0.08 m^2 at 64) and which holds under 1% of the scene's lightmapped
+// surface. At 25-64 texels per unit such a lightmap holds little more than the one colour
+// the probes around the object give as well (with direction), in charts of a texel or two
+// that cost more gutter than they hold (tea cups, spoons, chair legs). The share keeps
+// scenes modelled small (a 0.55 m Cornell box at 8 texels per unit, whose walls get 20
+// texels each) and quick bakes at a few texels per unit from losing their rooms.
+inline constexpr float kAutoObjectTexelsPerUnit = 5.0f;
+inline constexpr double kAutoObjectAreaShare = 0.01;
 
 // The texels an object's surface gets at `resolution` (Unity's rule, before packing):
 // (resolution x scaleInLightmap)^2 x its world area.
 double lightmapTexels(const Object& object, float resolution);
 
-// Whether a lightmapped object (isLightmapped) is lit by probes instead because
-// lightmapTexels < minTexels.
-bool tooSmallForLightmap(const Object& object, float resolution, float minTexels);
+// The world area of the scene's lightmapped objects (isLightmapped).
+double lightmappedArea(const Scene& scene);
+
+// Whether a lightmapped object (isLightmapped) is lit by probes instead: lightmapTexels <
+// minTexels when minTexels >= 0, else the automatic rule above (sceneArea: lightmappedArea).
+bool tooSmallForLightmap(const Object& object, float resolution, float minTexels,
+                         double sceneArea);
 
 struct AtlasSettings {
   float resolution = 10.0f;  // texels per world unit (before scaleInLightmap)
   // Lightmapped objects whose surface would get fewer texels than this are lit by probes
-  // instead (AtlasObject::probeLit), named in a warning. 0 = every object gets a lightmap.
+  // instead (AtlasObject::probeLit), named in a warning. 0 = every object gets a lightmap;
+  // negative = automatic (tooSmallForLightmap).
   float minObjectTexels = kMinObjectTexels;
   // Per scene object (or empty): the world units per UV unit its generated UVs were made
   // with (UnwrapResult::worldPerUv), 0 = not generated. Such an object gets exactly
@@ -116,7 +133,10 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // Pages: objects are sorted by height, then width (descending), then object index, and
 // filled into maxSize pages in that order, a new page when one is full; each page is then
 // shrunk to the smallest size (by area; sides multiples of 4 as block compression needs, or
-// maxSize) that holds its objects, inserted in that order or by width, area or longer side. Pages need not be powers of two: every
+// maxSize) that holds its objects, inserted in that order or by width, area or longer side,
+// or packed by their shapes (each object's covered texels per column, chart_packer.h, upright;
+// their rectangles may then overlap, their texels never) when that page is smaller. Pages
+// need not be powers of two: every
 // GPU API kiln targets samples such textures (lightmaps are not mipmapped), and
 // power-of-two pages left up to half of a page empty. Deterministic.
 // Objects too small for a useful lightmap (tooSmallForLightmap) get no page and probeLit,
@@ -124,6 +144,22 @@ std::pair<vec2, vec2> uv1Bounds(const Object& object);
 // Errors name the setting (maxSize < 1 + 2 padding, resolution <= 0) or the object (no uv1,
 // zero-area uv1).
 Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings);
+
+// Generated UVs packed chart by chart into their pages. Rectangles waste what an object's
+// charts leave empty of its rectangle (a wall's window, a chair's curved pieces, the ragged
+// top of its packing); here the charts of every object with generated UVs (`unwraps`, as
+// generateMissingLightmapUvs returned them) on a page, and the texel rectangles of the page's
+// other objects (upright, as one scale and offset places them), are packed together by
+// shape (chart_packer.h) with max(1, padding) empty texels between any two and `padding` to
+// the page's border. When that gives a smaller page, the generated objects' uv1 (in `scene`
+// and `unwraps`) become atlas UVs of that page, their scaleOffset the identity (1, 1, 0, 0)
+// and their texel rectangle the bounds of their charts (it may overlap other objects'
+// rectangles, never their texels); the other objects keep their rectangle's size and get a
+// new place. With settings.locked (a layout from a manifest), pages whose generated objects
+// have identity scaleOffsets are packed again the same way, and the result must match the
+// manifest (page size, the other objects' places): else an Error. Deterministic.
+Status packChartsIntoPages(Scene& scene, AtlasLayout& layout, const AtlasSettings& settings,
+                           std::vector<std::optional<UnwrapResult>>& unwraps);
 
 // The manifest's atlas part (manifest.h writes it): {"lightmaps": [{"index", "width",
 // "height"}], "objects": [{"node", "nodeIndex", "lightmapIndex", "scaleOffset": [sx, sy, ox,

@@ -10,21 +10,36 @@
 
 namespace kiln {
 
+namespace {
+
+// A chart edge on a texel boundary (2.0) may come out of the float UVs a hair past it
+// (1.99999), touching one more texel than the footprint says. Charts are therefore centred
+// in their footprint with at least kSlack to spare on every side, and a texel counts as
+// touched when a triangle comes within kSlack of it.
+constexpr double kSlack = 1e-3;
+
+}  // namespace
+
 ChartFootprint chartFootprint(const std::vector<std::array<glm::dvec2, 3>>& triangles,
                               glm::dvec2 extent) {
-  // A chart edge on a texel boundary (2.0) may come out of the float UVs a hair past it
-  // (1.99999), touching one more texel than the footprint says. Charts are therefore centred
-  // in their footprint with at least kSlack to spare on every side, and a texel counts as
-  // touched when a triangle comes within kSlack of it.
-  constexpr double kSlack = 1e-3;
+  const glm::ivec2 size(int(std::ceil(extent.x + 2.0 * kSlack)),
+                        int(std::ceil(extent.y + 2.0 * kSlack)));
+  const glm::dvec2 offset = (glm::dvec2(size) - extent) * 0.5;
+  std::vector<std::array<glm::dvec2, 3>> shifted(triangles.size());
+  for (size_t i = 0; i < triangles.size(); ++i)
+    for (int k = 0; k < 3; ++k) shifted[i][size_t(k)] = triangles[i][size_t(k)] + offset;
+  ChartFootprint f = footprintInFrame(shifted, size);
+  f.offset = offset;
+  return f;
+}
+
+ChartFootprint footprintInFrame(const std::vector<std::array<glm::dvec2, 3>>& triangles,
+                                glm::ivec2 size) {
   ChartFootprint f;
-  f.columns = int(std::ceil(extent.x + 2.0 * kSlack));
-  f.rows = int(std::ceil(extent.y + 2.0 * kSlack));
-  f.offset = (glm::dvec2(f.columns, f.rows) - extent) * 0.5;
+  f.columns = size.x;
+  f.rows = size.y;
   std::vector<double> lo(size_t(f.columns), 1e300), hi(size_t(f.columns), -1e300);
-  for (const auto& original : triangles) {
-    const std::array<glm::dvec2, 3> t = {original[0] + f.offset, original[1] + f.offset,
-                                         original[2] + f.offset};
+  for (const auto& t : triangles) {
     const double minX = std::min({t[0].x, t[1].x, t[2].x});
     const double maxX = std::max({t[0].x, t[1].x, t[2].x});
     const int first = std::clamp(int(std::floor(minX - kSlack)), 0, f.columns - 1);
@@ -71,6 +86,7 @@ struct Shape {
   int first = 0, last = -1;  // covered columns [first, last]
   int lowest = 0, highest = 0;  // covered rows [lowest, highest)
   std::vector<int> top;       // per column, -1 when empty
+  std::vector<int> bottom;    // per column, INT_MAX when empty
   std::vector<int> floor;     // per widened column (columns + 2 gutter), INT_MAX when none
 };
 
@@ -80,7 +96,8 @@ Shape makeShape(const ChartFootprint& f, bool turned, int gutter) {
   s.first = f.columns;
   s.lowest = f.rows;
   s.top.assign(size_t(f.columns), -1);
-  std::vector<int> bottom(size_t(f.columns), INT_MAX);
+  std::vector<int>& bottom = s.bottom;
+  bottom.assign(size_t(f.columns), INT_MAX);
   for (int c = 0; c < f.columns; ++c) {
     const int src = turned ? f.columns - 1 - c : c;
     const int b = f.bottom[size_t(src)], t = f.top[size_t(src)];
@@ -104,6 +121,13 @@ Shape makeShape(const ChartFootprint& f, bool turned, int gutter) {
 
 struct Placement {
   int x = 0, y = 0, end = INT_MAX;  // end: the top of the chart's covered rows
+  int64_t waste = INT64_MAX;        // empty texels left under the chart's columns
+
+  // Lower end first; at the same end, less waste (an L whose wide arm is up leaves a hollow
+  // under it that nothing can reach; turned, it leaves one on top that the next L fills).
+  bool before(const Placement& o) const {
+    return end != o.end ? end < o.end : waste < o.waste;
+  }
 };
 
 // Lowest placement of `s` in the height map (columns [0, width)): its covered texels inside
@@ -117,7 +141,12 @@ Placement place(const Shape& s, const std::vector<int>& heights, int width, int 
       if (column < 0 || column >= width || s.floor[size_t(w)] == INT_MAX) continue;
       y = std::max(y, heights[size_t(column)] - s.floor[size_t(w)]);
     }
-    if (y + s.highest < best.end) best = {x, y, y + s.highest};
+    if (y + s.highest > best.end) continue;
+    Placement here{x, y, y + s.highest, 0};
+    for (int c = s.first; c <= s.last; ++c)
+      if (s.bottom[size_t(c)] != INT_MAX)
+        here.waste += y + s.bottom[size_t(c)] - heights[size_t(x + c)];
+    if (here.before(best)) best = here;
   }
   return best;
 }
@@ -125,7 +154,8 @@ Placement place(const Shape& s, const std::vector<int>& heights, int width, int 
 }  // namespace
 
 ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
-                        const std::vector<ChartFootprint>& quarter, int gutter) {
+                        const std::vector<ChartFootprint>& quarter, int gutter,
+                        const ChartPackOptions& options) {
   ChartPacking best;
   const std::vector<ChartFootprint>& charts = upright;
   if (charts.empty()) return best;
@@ -140,16 +170,18 @@ ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
     area += double(sizes[i].x + gutter) * double(sizes[i].y + gutter);
     widest = std::max(widest, quarters ? std::min(charts[i].columns, quarter[i].columns)
                                        : charts[i].columns);
-    shapes[i] = {makeShape(charts[i], false, gutter), makeShape(charts[i], true, gutter)};
-    if (quarters) {
-      shapes[i].push_back(makeShape(quarter[i], false, gutter));
-      shapes[i].push_back(makeShape(quarter[i], true, gutter));
-    }
+    // Index o: quarter-turned when o >= 2, turned by 180 degrees when o is odd.
+    const bool rigid = i < options.rigid.size() && options.rigid[i];
+    if (rigid) widest = std::max(widest, charts[i].columns);
+    for (int o = 0; o < (rigid ? 1 : quarters ? 4 : 2); ++o)
+      shapes[i].push_back(makeShape(o >= 2 ? quarter[i] : charts[i], o % 2 == 1, gutter));
   }
   const std::vector<uint32_t> order = packingOrder(sizes);
   // Each width costs about width x sum of chart widths; bound the work per object.
-  const int lowest = std::max(widest, int(std::sqrt(area) / 2.0));
-  const int highest = std::max(lowest, int(std::ceil(2.0 * std::sqrt(area))));
+  const int lowest = options.fromWidest ? widest : std::max(widest, int(std::sqrt(area) / 2.0));
+  const int highest = std::min(options.maxWidth,
+                               std::max(lowest, int(std::ceil(2.0 * std::sqrt(area)))));
+  if (highest < widest) return best;
   double columnSum = 0.0;
   for (const ChartFootprint& f : charts) columnSum += f.columns + 2 * gutter;
   const double orientations = quarters ? 4.0 : 2.0;
@@ -170,7 +202,7 @@ ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
       size_t chosen = 0;
       for (size_t o = 0; o < shapes[i].size(); ++o) {
         const Placement q = place(shapes[i][o], heights, width, gutter);
-        if (q.end < p.end) {
+        if (q.before(p)) {
           p = q;
           chosen = o;
         }
@@ -191,8 +223,9 @@ ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
     }
     if (!fits) continue;
     trial.size = glm::ivec2(usedWidth, usedHeight);
-    const int64_t score = int64_t(std::max(usedWidth, (usedHeight + 1) / 2)) *
-                          std::max(usedHeight, (usedWidth + 1) / 2);
+    const int64_t score = options.cost ? options.cost(usedWidth, usedHeight)
+                                       : int64_t(std::max(usedWidth, (usedHeight + 1) / 2)) *
+                                             std::max(usedHeight, (usedWidth + 1) / 2);
     if (score < bestScore) {
       bestScore = score;
       best = trial;

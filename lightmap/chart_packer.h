@@ -13,7 +13,9 @@
 #pragma once
 
 #include <array>
+#include <climits>
 #include <cstdint>
+#include <functional>
 #include <glm/glm.hpp>
 #include <optional>
 #include <vector>
@@ -34,6 +36,12 @@ struct ChartFootprint {
 ChartFootprint chartFootprint(const std::vector<std::array<glm::dvec2, 3>>& triangles,
                               glm::dvec2 extent);
 
+// The footprint of triangles given in a fixed frame of size.x columns and size.y rows (all
+// inside [0, size]; offset 0): what an object's UV1 rectangle covers in its texel rectangle
+// (atlas.cpp), with the same 1e-3 texel tolerance.
+ChartFootprint footprintInFrame(const std::vector<std::array<glm::dvec2, 3>>& triangles,
+                                glm::ivec2 size);
+
 struct ChartPacking {
   glm::ivec2 size{0};               // [0, size) holds every covered texel
   std::vector<glm::ivec2> corners;  // per chart: where its (chosen) footprint's (0, 0) goes
@@ -42,14 +50,31 @@ struct ChartPacking {
                                     // (x -> columns - x, y -> rows - y)
 };
 
+struct ChartPackOptions {
+  // Per chart (or empty: none): placed upright only, never turned (an object placed by one
+  // scale and offset, which cannot turn it).
+  std::vector<bool> rigid;
+  // The cost of a packing whose covered texels span [0, w) x [0, h); the smallest wins
+  // (ties: the first width tried). Empty: the area as if widened to an aspect ratio of at
+  // most 2, max(w, ceil(h / 2)) x max(h, ceil(w / 2)). A packing whose cost is INT64_MAX
+  // does not count (e.g. it would not fit a page).
+  std::function<int64_t(int w, int h)> cost;
+  // Widest bin tried (e.g. a page's side less its padding).
+  int maxWidth = INT_MAX;
+  // Bins from the widest chart on (a page of a few tall charts may be a column of them), else
+  // from half the side of the charts' area (an object's charts, packed squarish).
+  bool fromWidest = false;
+};
+
 // Packs charts with at least `gutter` empty texels between the covered texels of any two
 // (Chebyshev distance; none between a chart and the rectangle's border). `upright[i]` is
 // chart i's footprint, `quarter[i]` (optional: empty = upright only) the footprint of the
-// same chart turned by 90 degrees; each is also tried turned by 180 degrees. Tries bin
-// widths from the widest chart to a few times the side of the charts' area and keeps the
-// smallest rectangle, scored as if widened to an aspect ratio of at most 2. Charts go in
-// order of height, then width (descending), then index.
+// same chart turned by 90 degrees; each is also tried turned by 180 degrees (charts not
+// options.rigid). Tries bin widths from the widest chart to a few times the side
+// of the charts' area and keeps the packing of least options.cost. Charts go in order of
+// height, then width (descending), then index. size (0, 0) when no width counted.
 ChartPacking packCharts(const std::vector<ChartFootprint>& upright,
-                        const std::vector<ChartFootprint>& quarter, int gutter);
+                        const std::vector<ChartFootprint>& quarter, int gutter,
+                        const ChartPackOptions& options = {});
 
 }  // namespace kiln

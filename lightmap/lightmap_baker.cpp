@@ -1173,6 +1173,9 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   if (cancelled(cancel)) return Error{"cancelled"};
   if (!layout) return Error{"lightmap atlas: " + layout.error()};
   result.layout = std::move(layout).value();
+  if (Status s = packChartsIntoPages(result.scene, result.layout, atlas, result.unwraps); !s)
+    return Error{"lightmap atlas: " + s.error()};
+  if (cancelled(cancel)) return Error{"cancelled"};
   result.warnings = result.layout.warnings;
 
   // Stage 3: texels.

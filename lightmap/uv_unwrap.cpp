@@ -942,9 +942,10 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   const size_t n = scene.objects.size();
   std::vector<std::optional<UnwrapResult>> unwraps(n);
   std::vector<std::string> errors(n);
+  const double sceneArea = lightmappedArea(scene);
   auto needs = [&](const Object& o) {
     return isLightmapped(o) && o.uv1.size() != o.positions.size() &&
-           !tooSmallForLightmap(o, resolution, settings.minObjectTexels);
+           !tooSmallForLightmap(o, resolution, settings.minObjectTexels, sceneArea);
   };
   // Progress in triangles: objects differ wildly in size, and time grows with triangles.
   size_t triangles = 0;

@@ -5,6 +5,8 @@
 #include <nlohmann/json.hpp>
 
 #include "lightmap/atlas.h"
+#include "lightmap/texel_raster.h"
+#include "lightmap/uv_unwrap.h"
 #include "tests/test_util.h"
 
 namespace kiln {
@@ -151,6 +153,149 @@ TEST(LightmapAtlas, ObjectsTooSmallForALightmapAreProbeLit) {
   const auto all = packAtlas(scene, settings);
   ASSERT_FALSE(all.ok());
   EXPECT_NE(all.error().find("'tiny'"), std::string::npos) << all.error();
+}
+
+// A flat L of five 1 x 1 squares (arms 1 wide and 3 long, a 3 x 3 bounding box) at height
+// y, one object.
+uint32_t addL(Scene& scene, const std::string& name, float y) {
+  const uint32_t first = uint32_t(scene.objects.size());
+  for (const vec2 c : {vec2(0, 0), vec2(1, 0), vec2(2, 0), vec2(0, 1), vec2(0, 2)})
+    test::addQuad(scene, name, vec3(c.x, y, c.y), vec3(c.x, y, c.y + 1),
+                  vec3(c.x + 1, y, c.y + 1), vec3(c.x + 1, y, c.y), 0);
+  Object& l = scene.objects[first];
+  for (uint32_t k = first + 1; k < first + 5; ++k) {
+    const Object& q = scene.objects[k];
+    const uint32_t base = uint32_t(l.positions.size());
+    l.positions.insert(l.positions.end(), q.positions.begin(), q.positions.end());
+    l.normals.insert(l.normals.end(), q.normals.begin(), q.normals.end());
+    l.uv0.insert(l.uv0.end(), q.uv0.begin(), q.uv0.end());
+    for (const uvec3& t : q.triangles) l.triangles.push_back(t + uvec3(base));
+    l.triangleMaterial.insert(l.triangleMaterial.end(), q.triangleMaterial.begin(),
+                              q.triangleMaterial.end());
+  }
+  l.uv1.clear();  // generated below
+  scene.objects.resize(first + 1);
+  return first;
+}
+
+TEST(LightmapAtlas, ChartsPackedIntoThePageBeatTheirObjectsRectangles) {
+  // Eight L-shaped floors with generated UVs at 20 texels per unit: each L covers 5/9 of its
+  // 60 x 60 rectangle, so no packing of their rectangles fills more than 56% of a page.
+  // Packed chart by chart, an L's arm goes into the corner of an L turned by 180 degrees
+  // (two make a 3 x 4 rectangle less two squares, 83% full, less the gutters).
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  for (int i = 0; i < 8; ++i) addL(scene, "L" + std::to_string(i), float(i));
+  AtlasSettings settings;
+  settings.resolution = 20.0f;
+  std::vector<std::optional<UnwrapResult>> unwraps(scene.objects.size());
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    UnwrapSettings u;
+    u.texelsPerUnit = settings.resolution;
+    u.gutterTexels = settings.padding;
+    const Result<UnwrapResult> r = generateLightmapUvs(scene.objects[i], u);
+    ASSERT_TRUE(r.ok()) << r.error();
+    ASSERT_EQ(r->stats.chartCount, 1);
+    scene.objects[i] = applyUnwrap(scene.objects[i], *r);
+    unwraps[i] = *r;
+    settings.worldPerUv.push_back(r->worldPerUv);
+  }
+  const Scene local = scene;  // object UVs, as generateMissingLightmapUvs leaves them
+  const auto unwrapped = unwraps;
+  Result<AtlasLayout> layout = packAtlas(scene, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  ASSERT_EQ(layout->pages.size(), 1u);
+  const AtlasPage rectangles = layout->pages[0];
+  ASSERT_TRUE(packChartsIntoPages(scene, *layout, settings, unwraps).ok());
+  const AtlasPage page = layout->pages[0];
+  EXPECT_LT(page.width * page.height, rectangles.width * rectangles.height);
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    EXPECT_EQ(layout->objects[i].scaleOffset, vec4(1, 1, 0, 0));
+    EXPECT_EQ(unwraps[i]->uv1, scene.objects[i].uv1);
+  }
+
+  // Every texel of the page rasterized: each L's, at least `padding` empty texels between
+  // two Ls and to the page's border.
+  const auto raster = rasterizeAtlas(scene, *layout, RasterSettings{});
+  ASSERT_TRUE(raster.ok()) << raster.error();
+  const RasterPage& texels = (*raster)[0];
+  std::vector<size_t> count(scene.objects.size(), 0);
+  const int p = settings.padding;
+  for (int y = 0; y < texels.height; ++y)
+    for (int x = 0; x < texels.width; ++x) {
+      const int o = texels.at(x, y).object;
+      if (o < 0) continue;
+      ++count[size_t(o)];
+      EXPECT_TRUE(x >= p && y >= p && x < texels.width - p && y < texels.height - p);
+      for (int dy = -p; dy <= p; ++dy)
+        for (int dx = -p; dx <= p; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if (nx < 0 || ny < 0 || nx >= texels.width || ny >= texels.height) continue;
+          const int other = texels.at(nx, ny).object;
+          EXPECT_TRUE(other < 0 || other == o) << x << "," << y << " next to " << nx << "," << ny;
+        }
+    }
+  size_t total = 0;
+  for (size_t c : count) {
+    // 5 m^2 at 400 texels per m^2, plus at most the texels its 12 m of border touch.
+    EXPECT_GE(c, 2000u);
+    EXPECT_LE(c, 2000u + 2 * 12 * 20 + 8);
+    total += c;
+  }
+  const double fill = double(total) / (double(page.width) * page.height);
+  EXPECT_GT(fill, 0.65);  // rectangles: at most 5/9
+  std::printf("8 Ls: rectangles %d x %d, charts %d x %d, fill %.1f%%\n", rectangles.width,
+              rectangles.height, page.width, page.height, 100.0 * fill);
+
+  // --lock-atlas: the same page packed again from the objects' own UVs gives the same UVs; a
+  // page size that no longer holds the charts is an error.
+  AtlasSettings lock = settings;
+  lock.locked = *layout;
+  Scene again = local;
+  auto againUnwraps = unwrapped;
+  AtlasLayout locked = *layout;
+  ASSERT_TRUE(packChartsIntoPages(again, locked, lock, againUnwraps).ok());
+  for (size_t i = 0; i < scene.objects.size(); ++i)
+    EXPECT_EQ(again.objects[i].uv1, scene.objects[i].uv1);
+  again = local;
+  againUnwraps = unwrapped;
+  locked = *layout;
+  locked.pages[0].width -= 4;
+  lock.locked = locked;
+  const Status mismatch = packChartsIntoPages(again, locked, lock, againUnwraps);
+  ASSERT_FALSE(mismatch.ok());
+  EXPECT_NE(mismatch.error().find("no longer pack"), std::string::npos) << mismatch.error();
+}
+
+TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitByDefault) {
+  // At 10 texels per unit the automatic rule takes objects without TEXCOORD_1 under 50 texels
+  // (0.5 m^2) that hold under 1% of the lightmapped area. A 10 x 10 floor (100 m^2) with a
+  // 0.5 x 0.5 prop (25 texels, 0.25%): the prop goes to probes without UVs of its own, not
+  // with them, nor at 20 texels per unit (100 texels > 5 x 20) or with minObjectTexels 0.
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "floor", 10.0f, 10.0f);
+  const uint32_t prop = addFloor(scene, "prop", 0.5f, 0.5f, 1.0f);
+  const uint32_t authored = addFloor(scene, "authored", 0.5f, 0.5f, 2.0f);
+  scene.objects[prop].uv1.clear();
+  const double area = lightmappedArea(scene);
+  EXPECT_NEAR(area, 100.5, 1e-4);
+  EXPECT_TRUE(tooSmallForLightmap(scene.objects[prop], 10.0f, kMinObjectTexels, area));
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[authored], 10.0f, kMinObjectTexels, area));
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[prop], 20.0f, kMinObjectTexels, area));
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[prop], 10.0f, 0.0f, area));
+  const auto layout = packAtlas(scene, AtlasSettings{});
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_TRUE(layout->objects[prop].probeLit);
+  EXPECT_EQ(layout->objects[authored].lightmapIndex, 0);
+  ASSERT_EQ(layout->warnings.size(), 1u);
+  EXPECT_NE(layout->warnings[0].find("'prop'"), std::string::npos) << layout->warnings[0];
+  // A scene modelled small (four 0.5 x 0.5 walls, 25% of the surface each) keeps them all.
+  Scene small;
+  test::addMaterial(small, test::lambert(vec3(0.5f)));
+  for (int i = 0; i < 4; ++i) addFloor(small, "wall" + std::to_string(i), 0.5f, 0.5f, float(i));
+  for (const Object& o : small.objects)
+    EXPECT_FALSE(tooSmallForLightmap(o, 10.0f, kMinObjectTexels, lightmappedArea(small)));
 }
 
 TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {

@@ -351,8 +351,9 @@ void registerBakeCommand(CLI::App& app) {
       ->check(CLI::Range(1, 16384));
   b->add_option("--min-object-texels", o->minObjectTexels,
                 "Objects whose surface would get fewer lightmap texels are lit by probes "
-                "instead, listed in a warning and the manifest (default 0 = never; 64-128 suits 25-64 "
-                "texels per unit)")
+                "instead, listed in a warning and the manifest (default: objects without "
+                "TEXCOORD_1 under 5 x --resolution texels and 1% of the lightmapped area; "
+                "0 = never)")
       ->check(CLI::Range(0.0f, 1e9f));
   b->add_option("--padding", o->padding, "Empty texels around every object (default 2)")
       ->check(CLI::Range(0, 256));

@@ -20,6 +20,7 @@
 #include "lightmap/manifest.h"
 #include "lightmap/seams.h"
 #include "probes/lppv.h"
+#include "probes/probe_baker.h"
 #include "src/integrator.h"
 #include "src/parallel.h"
 #include "src/progress.h"
@@ -211,6 +212,7 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
     listed[o] = true;
     PreviewLightmapObject& entry = set.objects[o];
     entry.lightmapIndex = e.lightmapIndex;
+    entry.probeLit = e.probeLit;
     if (entry.lightmapIndex < 0) continue;
     entry.scaleOffset = uv1IsAtlasUv ? vec4(1.0f, 1.0f, 0.0f, 0.0f) : e.scaleOffset;
     if (object.uv1.empty())
@@ -489,6 +491,42 @@ class Renderer {
   }
 
  private:
+  // Probe light for an object the bake left to probes, without a probe file: probes baked
+  // as `kiln probes bake` bakes them (the lightmaps' lighting mode and transport settings)
+  // just outside the middle of each face of its bounds (its centre may be inside it: a cup's
+  // inside is dark), averaged with their validity as weights so that points inside other
+  // geometry (under a table top) count little; the centre when none is valid.
+  ObjectProbeLight probeLightAround(const LightmapSet& lm, const Bounds3& b, size_t object) const {
+    ProbeBakeSettings ps;
+    ps.lightingMode = lm.lightingMode;
+    ps.bounces = lm.bounces;
+    ps.albedoBoost = lm.albedoBoost;
+    ps.indirectIntensity = lm.indirectIntensity;
+    const Integrator integrator(scene_, *tracer_, probeIntegratorSettings(scene_, ps));
+    const LightModePlan plan = probeLightModePlan(scene_, ps);
+    const vec3 centre = 0.5f * (b.min + b.max), half = 0.5f * (b.max - b.min);
+    const float margin = 0.05f * glm::length(b.max - b.min) + 1e-3f;
+    ObjectProbeLight light;
+    light.available = true;
+    light.occlusion = glm::vec4(0.0f);
+    float weights = 0.0f;
+    for (int k = 0; k < 7; ++k) {
+      vec3 p = centre;
+      if (k < 6) p[k / 2] += (k % 2 ? 1.0f : -1.0f) * (half[k / 2] + margin);
+      if (k == 6 && weights > 0.0f) break;  // the centre only when no face point is valid
+      const uint64_t key = hashValues(settings_.seed, uint64_t(object), uint64_t(k));
+      const ProbeSample sample = bakeProbe(integrator, p, key, ps.rays, ps.lightSamples);
+      const float w = k == 6 ? 1.0f : sample.validity > 0.5f ? sample.validity : 0.0f;
+      if (w <= 0.0f) continue;
+      light.sh += w * sample.sh;
+      light.occlusion += w * bakeProbeOcclusion(integrator, plan, p, key, ps.occlusionSamples);
+      weights += w;
+    }
+    light.sh *= 1.0f / weights;
+    light.occlusion /= weights;
+    return light;
+  }
+
   Status setUpPreview() {
     const LightmapSet& lm = *in_.lightmaps;
     if (!in_.spheres.empty() && !in_.probes)
@@ -502,14 +540,20 @@ class Renderer {
     for (size_t o = 0; o < scene_.objects.size(); ++o) {
       if (lm.objects[o].lightmapIndex >= 0) continue;
       const Object& object = scene_.objects[o];
+      Bounds3 b;
+      for (vec3 p : object.positions) b.extend(p);
+      if (!in_.probes && lm.objects[o].probeLit && !b.empty()) {
+        // Too small for a lightmap (kiln bake's default takes small props): probes baked
+        // around it, so that a preview without a probe file does not draw it black.
+        objectProbes_[o] = probeLightAround(lm, b, o);
+        continue;
+      }
       if (!in_.probes) {
         warnings_.push_back("node " + quoted(object.name) +
                             " has no lightmap and no probes were given (--probes): drawn with "
                             "realtime lights and emission only");
         continue;
       }
-      Bounds3 b;
-      for (vec3 p : object.positions) b.extend(p);
       if (b.empty()) continue;
       Result<ObjectProbeLight> light =
           probeLightFor(*in_.probes, b.min, b.max, object.settings.lppv, settings_.threads);

@@ -89,6 +89,9 @@ struct PreviewLightmapPage {
 struct PreviewLightmapObject {
   int lightmapIndex = -1;                    // page, or -1: no lightmap
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // atlasUV = uv1 * xy + zw
+  // Lightmapped by its settings but too small for a lightmap (manifest "probeLit"): lit by
+  // probes, and without --probes by one probe the preview bakes at its centre.
+  bool probeLit = false;
 };
 
 // What the bake did with one scene light.
