@@ -574,8 +574,14 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
       for (uint32_t u = 0; u < m; ++u) {
         const uint32_t first = done + uint32_t(uint64_t(u) * d / m);
         const uint32_t count = done + uint32_t(uint64_t(u + 1) * d / m) - first;
-        const uint32_t bFirst = first + b * count / kVarianceBatches;
-        const uint32_t bCount = first + (b + 1) * count / kVarianceBatches - bFirst;
+        // On a footprint grid with fewer paths per point than batches (16 points at 16
+        // paths: one each), slice b of every point would put all of them in the last batch,
+        // leaving one batch and no variance for the denoiser; point u's slices are then
+        // rotated by u, so the points' paths spread over the batches.
+        const uint32_t slice =
+            footprintGrid && count < kVarianceBatches ? (b + u) % kVarianceBatches : b;
+        const uint32_t bFirst = first + slice * count / kVarianceBatches;
+        const uint32_t bCount = first + (slice + 1) * count / kVarianceBatches - bFirst;
         if (bCount == 0) continue;
         lum += run(use[u], bFirst, bCount);
         n += bCount;
