@@ -135,13 +135,19 @@ std::vector<TexelRef> coveredTexels(const std::vector<RasterPage>& pages) {
   return refs;
 }
 
-// The sample points a texel's light is estimated at: its supersample points, or the main
-// sample (supersampling 1, or a sliver no grid point fell on).
+// The sample points a texel's light is estimated at without a footprint grid: its
+// supersample points, or the main sample (supersampling 1, or a sliver no grid point fell on).
 std::pair<TexelPoint*, uint32_t> texelPoints(RasterPage& page, TexelSample& texel,
                                              int supersampling) {
-  if ((supersampling > 1 || texel.footprintGrid) && texel.subsampleCount > 0)
+  if (supersampling > 1 && texel.subsampleCount > 0)
     return {&page.subsamples[texel.firstSubsample], texel.subsampleCount};
   return {&texel.sample, 1u};
+}
+
+// A texel's footprint grid points (TexelSample::firstGridPoint); empty without a grid.
+std::pair<TexelPoint*, uint32_t> gridPoints(RasterPage& page, TexelSample& texel) {
+  if (!texel.footprintGrid()) return {nullptr, 0u};
+  return {&page.subsamples[texel.firstGridPoint], texel.gridPointCount};
 }
 
 // Stage 4, one point: rays along the surface's tangent plane (geometric normal of its
@@ -228,15 +234,54 @@ bool onValidityEdge(const RasterPage& page, const std::vector<uint8_t>& validity
   return false;
 }
 
+// Stage 4b, one grid point: whether the straight path along the surface from the texel's
+// main sample `anchor` (after push-out: on the visible surface unless it lies more than
+// push-out's reach inside a solid) to grid point `point` crosses geometry. Both ends are
+// lifted off the surface along their triangles' geometric normals by the tracer's offset
+// plus how far each lies below the other's tangent plane: on a flat surface that is the
+// offset alone, so a wall standing on it or a solid's face (even a double-sided one, which
+// push-out cannot see into) cuts the segment; on a convex surface (a cylinder, a box's edge
+// inside one chart) the segment then clears the surface's own bulge between the two points
+// (the sagitta of a chord is a quarter of the depth of its end below the other's tangent
+// plane). BLEND surfaces let light through and do not cut it, as in push-out. Returns true
+// when the point is hidden from the anchor (a wall or a solid's face in between); adds the
+// rays traced to `rays`.
+bool hiddenFromAnchor(const Scene& scene, const Tracer& tracer, uint32_t object,
+                      const TexelPoint& anchor, const TexelPoint& point, uint64_t& rays) {
+  const Object& o = scene.objects[object];
+  const vec3 na = o.faceNormal(anchor.triangle), ng = o.faceNormal(point.triangle);
+  const float lift = std::max({0.0f, -glm::dot(point.position - anchor.position, na),
+                               -glm::dot(anchor.position - point.position, ng)});
+  const vec3 from = offsetRayOrigin(anchor.position, na) + lift * na;
+  const vec3 to = offsetRayOrigin(point.position, ng) + lift * ng;
+  const vec3 d = to - from;
+  const float length = glm::length(d);
+  if (!(length > 0.0f)) return false;
+  Ray ray{from, d / length, 0.0f, length};
+  // A BLEND surface in the way: go on past it (at most a few layers of glass).
+  for (int layer = 0; layer < 8; ++layer) {
+    ++rays;
+    const auto hit = tracer.intersect(ray);
+    if (!hit) return false;
+    if (scene.materialOf(hit->object, hit->triangle).alphaMode != AlphaMode::Blend) return true;
+    ray.tMin = hit->t + 1e-4f;
+  }
+  return true;
+}
+
 // Stage 4b: texels next to geometry (a sample point push-out moved, or a tangent-plane ray
 // that hit a surface within a texel) and, when the bounce cache's first pass gave each
 // texel's validity (`validity`, per page, else null), texels on an edge between valid and
 // invalid texels get a kFootprintGrid^2 grid of points over their footprint (at least the
-// supersampling grid), pushed out like the others; the points found inside a solid (or,
-// in lightTexel, seeing back faces) are the hidden part of the footprint, left out of the
-// texel's value. Texels elsewhere keep their points: nothing within a texel of them can
-// hide part of their footprint. The validity edge finds what push-out's tangent-plane rays
-// cannot: a surface hidden behind a parallel one (the ceiling 1 mm above the lamp).
+// supersampling grid). A grid point the texel's main sample cannot reach along the surface
+// without crossing geometry (hiddenFromAnchor) is hidden: inside a solid standing on the
+// surface, or on the far side of a wall the texel straddles (a texel belongs to the side its
+// main sample is on, after push-out). The others, found inside in lightTexel (seeing back
+// faces, enclosed), are hidden too; the texel's value is the mean over the visible rest.
+// Texels elsewhere keep their points: nothing within a texel of them can hide part of their
+// footprint. The validity edge finds what push-out's tangent-plane rays cannot: a surface
+// hidden behind a parallel one (the ceiling 1 mm above the lamp). One ray per grid point;
+// the grid points are not pushed out (a point push-out would move is hidden anyway).
 bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
                     const Scene& scene, const AtlasLayout& layout, const Tracer& tracer,
                     int supersampling, const std::vector<std::vector<uint8_t>>* validity,
@@ -268,9 +313,10 @@ bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>&
     error = grids.error();
     return false;
   }
-  // The grid points of the flagged texels, appended to their page's subsamples.
+  // The grid points of the flagged texels, appended to their page's subsamples (after the
+  // supersampling points, which stay).
   struct NewPoint {
-    uint32_t page, index, object;
+    uint32_t page, texel, index;
   };
   std::vector<NewPoint> added;
   for (const TexelRef& t : texels) {
@@ -280,11 +326,10 @@ bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>&
     if (g.subsampleCount == 0) continue;  // a sliver no grid point falls on
     RasterPage& page = pages[t.page];
     TexelSample& texel = page.texels[t.index];
-    texel.firstSubsample = uint32_t(page.subsamples.size());
-    texel.subsampleCount = g.subsampleCount;
-    texel.footprintGrid = true;
+    texel.firstGridPoint = uint32_t(page.subsamples.size());
+    texel.gridPointCount = g.subsampleCount;
     for (uint32_t s = 0; s < g.subsampleCount; ++s) {
-      added.push_back({t.page, uint32_t(page.subsamples.size()), uint32_t(texel.object)});
+      added.push_back({t.page, t.index, uint32_t(page.subsamples.size())});
       page.subsamples.push_back(grid.subsamples[g.firstSubsample + s]);
     }
   }
@@ -297,10 +342,10 @@ bool footprintStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>&
         uint64_t local = 0;
         for (size_t i = begin; i < end; ++i) {
           RasterPage& page = pages[added[i].page];
+          const TexelSample& texel = page.texels[added[i].texel];
           TexelPoint& point = page.subsamples[added[i].index];
-          const uint32_t object = added[i].object;
-          const float reach = kPushReachTexels / layout.objects[object].texelsPerUnit;
-          local += pushOutPoint(scene, tracer, object, reach, point);
+          point.hidden = hiddenFromAnchor(scene, tracer, uint32_t(texel.object), texel.sample,
+                                          point, local);
         }
         rays += local;
       },
@@ -415,40 +460,38 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
   return true;
 }
 
-// Stage 5, one texel, in rounds. Round r adds samples [N_r, N_{r+1}) of the texel's stream
-// (N_0 = 0, N_1 = the first round's count, then doubling up to the cap), split evenly over
-// the texel's points (point i takes [N_r + i D / k, N_r + (i + 1) D / k), D = N_{r+1} -
-// N_r), so the union of the texel's paths is always one Sobol prefix [0, N) whatever the
-// number of rounds. Each round is kVarianceBatches batches, batch b holding slice b of every
-// point's share (so a batch mean is over the whole texel, not one point), and the spread of
-// all batch means gives the variance of the texel's mean. With an error target, the texel
-// stops when that standard error is at most target x (luminance + floor) (Beast's final
-// gather contrast threshold, relative to the texel plus an absolute floor so that dark
-// texels do not take the cap); without one, one round of s.samples.
+// Stage 5, one set of points of a texel, in rounds. Round r adds samples [N_r, N_{r+1}) of
+// the texel's stream (N_0 = 0, N_1 = the first round's count, then doubling up to the cap),
+// split evenly over the points (point i takes [N_r + i D / k, N_r + (i + 1) D / k), D =
+// N_{r+1} - N_r), so the union of the texel's paths is always one Sobol prefix [0, N)
+// whatever the number of rounds. Each round is kVarianceBatches batches, batch b holding
+// slice b of every point's share (so a batch mean is over the whole texel, not one point),
+// and the spread of all batch means gives the variance of the texel's mean. With an error
+// target, the texel stops when that standard error is at most target x (luminance + floor)
+// (Beast's final gather contrast threshold, relative to the texel plus an absolute floor so
+// that dark texels do not take the cap); without one, one round of s.samples.
 // Every decision uses this texel's own samples: the result does not depend on threads.
 //
 // Points inside geometry (back-face share > tolerance after the first round, or enclosed)
 // are left out of a valid texel's value, which is then the mean over the texel's unoccluded
-// points (what a visible surface point near the texel sees); later rounds skip them. On a
-// footprint grid (texels next to geometry, TexelSample::footprintGrid), the points push-out
-// found inside a solid are hidden too and never traced: the texel holds the mean over the
-// visible part of its footprint, and `coverage` is that part's share. A texel with no
-// visible point is invalid; its value is then the plain mean over all its points (the
-// physical irradiance of a surface enclosed by geometry, ~0: paths end at back faces,
-// shadow rays are blocked), which it keeps unless it is next to a valid texel (postPage).
-TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
-                      const TexelPoint* points, uint32_t pointCount, bool footprintGrid,
-                      float enclosedReach, uint64_t& extraRays) {
+// points (what a visible surface point near the texel sees); later rounds skip them. With
+// `footprintGrid` the points are a grid over the texel's footprint (TexelSample::
+// firstGridPoint) whose hidden points (TexelPoint::hidden: across a wall or inside a solid
+// from the texel's main sample) are never traced: the texel holds the mean over the visible
+// part of its footprint, and `coverage` is that part's share. With no visible point the
+// result is invalid; its value is then the plain mean over all its points (the physical
+// irradiance of a surface enclosed by geometry, ~0: paths end at back faces, shadow rays
+// are blocked), which it keeps unless it is next to a valid texel (postPage).
+TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uint64_t key,
+                       const TexelPoint* points, uint32_t pointCount, bool footprintGrid,
+                       float enclosedReach, uint64_t& extraRays) {
   TexelLight out;
-  // Points that take part: on a footprint grid the visible ones (all of them when push-out
-  // found every point inside a solid: the texel then bakes the light just outside it, as a
-  // texel whose only point was pushed out does).
+  // Points that take part: on a footprint grid the ones not hidden (the caller gives a grid
+  // with at least one), else all.
   std::vector<uint32_t> active;
   for (uint32_t i = 0; i < pointCount; ++i)
-    if (!footprintGrid || !points[i].pushedOut) active.push_back(i);
-  const uint32_t visibleGridPoints = uint32_t(active.size());
-  if (active.empty())
-    for (uint32_t i = 0; i < pointCount; ++i) active.push_back(i);
+    if (!footprintGrid || !points[i].hidden) active.push_back(i);
+  assert(!active.empty());
   const uint32_t k = uint32_t(active.size());
   std::vector<PointSums> sums(k);
   std::vector<uint32_t> backFaces(k, 0);
@@ -531,8 +574,14 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
       for (uint32_t u = 0; u < m; ++u) {
         const uint32_t first = done + uint32_t(uint64_t(u) * d / m);
         const uint32_t count = done + uint32_t(uint64_t(u + 1) * d / m) - first;
-        const uint32_t bFirst = first + b * count / kVarianceBatches;
-        const uint32_t bCount = first + (b + 1) * count / kVarianceBatches - bFirst;
+        // On a footprint grid with fewer paths per point than batches (16 points at 16
+        // paths: one each), slice b of every point would put all of them in the last batch,
+        // leaving one batch and no variance for the denoiser; point u's slices are then
+        // rotated by u, so the points' paths spread over the batches.
+        const uint32_t slice =
+            footprintGrid && count < kVarianceBatches ? (b + u) % kVarianceBatches : b;
+        const uint32_t bFirst = first + slice * count / kVarianceBatches;
+        const uint32_t bCount = first + (slice + 1) * count / kVarianceBatches - bFirst;
         if (bCount == 0) continue;
         lum += run(use[u], bFirst, bCount);
         n += bCount;
@@ -584,8 +633,7 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
   // each at its own estimate (0 for a point inside a solid), over the value stored. On a
   // footprint grid that is the visible share when the points inside see nothing.
   out.coverage = 1.0f;
-  if (footprintGrid && visibleGridPoints == 0) out.coverage = 0.0f;  // all inside a solid
-  if (footprintGrid && visibleGridPoints > 0) {
+  if (footprintGrid) {
     double footprint = 0.0;
     for (uint32_t j = 0; j < k; ++j)
       if (sums[j].samples > 0) footprint += luminance(vec3(sums[j].light / double(sums[j].samples)));
@@ -630,6 +678,41 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
       out.varianceCoarse = float(gss / double(groups.size() - 1) / count);
     }
   }
+  return out;
+}
+
+// Stage 5, one texel: with a footprint grid (TexelSample::footprintGrid), the mean over the
+// grid's visible points; when the grid has none (every point hidden from the main sample or
+// found inside: a texel wholly inside a solid whose main sample push-out moved out, or one
+// more than push-out's reach inside, whose main sample sees only the inside), the texel is
+// baked as without a grid, at its own points (`points`: the main sample or the supersampling
+// points, pushed out): it holds the light just outside the solid, as every texel did before
+// the grid, and is invalid only where it was then. Its coverage is 0 (no visible footprint
+// point). Both use the texel's stream from sample 0, so the fallback is bit for bit the
+// texel's value without a grid.
+TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint64_t key,
+                      const TexelPoint* points, uint32_t pointCount, const TexelPoint* grid,
+                      uint32_t gridCount, float enclosedReach, uint64_t& extraRays) {
+  bool anyVisible = false;
+  for (uint32_t i = 0; i < gridCount && !anyVisible; ++i) anyVisible = !grid[i].hidden;
+  if (anyVisible) {
+    TexelLight g =
+        lightPoints(integrator, s, key, grid, gridCount, true, enclosedReach, extraRays);
+    if (g.valid) {
+      // A fill seed (TexelLight::onVisibleSurface) as without the grid: one of the texel's
+      // own points lies where it was rasterized. Its grid points are never moved, so they
+      // would make every texel beside a solid a seed, and fill texels inside the solid that
+      // no lookup at a visible point reads (a wall 2.5 texels thick standing on a floor:
+      // the floor's middle row under it, between the rows push-out moved to either face,
+      // took the mean of the sunlit outside and the room).
+      g.onVisibleSurface = false;
+      for (uint32_t i = 0; i < pointCount; ++i) g.onVisibleSurface |= !points[i].pushedOut;
+      return g;
+    }
+  }
+  TexelLight out =
+      lightPoints(integrator, s, key, points, pointCount, false, enclosedReach, extraRays);
+  if (gridCount > 0) out.coverage = 0.0f;
   return out;
 }
 
@@ -701,7 +784,11 @@ WorkSplit splitTexels(std::vector<RasterPage>& pages, const std::vector<TexelRef
   const double perSample = 1.0 + (s.ambientOcclusion ? 1.0 : 0.0) + (s.shadowmask ? 1.0 : 0.0);
   return splitWork(texels.size(), kTexelTile, [&](size_t i) {
     RasterPage& page = pages[texels[i].page];
-    const uint32_t points = texelPoints(page, page.texels[texels[i].index], s.supersampling).second;
+    TexelSample& texel = page.texels[texels[i].index];
+    // A footprint grid's visible points (its fallback to the texel's own points is rare).
+    const uint32_t points =
+        texel.footprintGrid() ? texel.gridPointCount
+                              : texelPoints(page, texel, s.supersampling).second;
     // Adaptive sampling's own count per texel, as the light stage uses it.
     const uint32_t samples = s.texelSamples ? std::max((*s.texelSamples)[i], points) : s.samples;
     return double(samples) * perSample + double(points) * double(kEnclosureRays);
@@ -732,14 +819,15 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
           RasterPage& page = pages[texels[i].page];
           TexelSample& texel = page.texels[texels[i].index];
           const auto [points, count] = texelPoints(page, texel, s.supersampling);
+          const auto [grid, gridCount] = gridPoints(page, texel);
           const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
           const uint64_t texelStart = Integrator::threadRayCount() + extraRays;
           LightSettings texelSettings = s;
           if (s.texelSamples) texelSettings.samples = std::max((*s.texelSamples)[i], count);
-          out[i] = lightTexel(integrator, texelSettings, key, points, count,
-                              texel.footprintGrid, reach, extraRays);
+          out[i] = lightTexel(integrator, texelSettings, key, points, count, grid, gridCount,
+                              reach, extraRays);
           out[i].rays = Integrator::threadRayCount() + extraRays - texelStart;
         }
         rays += Integrator::threadRayCount() - before + extraRays;
@@ -1234,7 +1322,8 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
                        settings.supersampling, bounceCache ? &cacheValidity : nullptr,
                        showProgress, parallel, rays, footprintError)) ||
       cancelled(cancel))
-    return Error{footprintError.empty() ? "cancelled" : "lightmap texels: " + footprintError};
+    return Error{footprintError.empty() || cancelled(cancel) ? "cancelled"
+                                                               : "lightmap texels: " + footprintError};
   const Integrator integrator(result.scene, **tracer, is);
   LightSettings ls;
   ls.samples = uint32_t(settings.samplesPerTexel);

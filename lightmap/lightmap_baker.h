@@ -106,10 +106,11 @@ struct LightmapBakeSettings {
   bool denoise = true;
   bool stitchSeams = true;
   // Hidden-edge texels (lightmap_baker.cpp, footprintStage): texels next to geometry get a
-  // 4 x 4 grid of points over their footprint, and the points inside a solid are left out of
-  // their value. Off by default: a grid texel straddling a thin wall still mixes the light
-  // of both sides (two_rooms), and one whose remaining points are all inside turns invalid.
-  bool footprintGrid = false;
+  // 4 x 4 grid of points over their footprint, and the points their main sample cannot reach
+  // along the surface (inside a solid, across a wall) or found inside are left out of their
+  // value; a texel with no visible grid point is baked at its own points, as without the
+  // grid. false = every texel at its main sample (or supersampling points).
+  bool footprintGrid = true;
   // Keep each page's visible footprint coverage (LightmapPageResult::coverage).
   bool coverageMap = false;
   // Execution.

@@ -140,6 +140,7 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["errorTarget"] = shortestDecimal(s.errorTarget);
   j["bounceCacheSamples"] = s.bounceCacheSamples;
   j["adaptiveSamples"] = s.adaptiveSamples;
+  j["footprintGrid"] = s.footprintGrid;
   j["minSamples"] = s.minSamples;
   j["errorFloor"] = shortestDecimal(s.errorFloor);
   j["seed"] = s.seed;

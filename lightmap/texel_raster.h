@@ -46,6 +46,10 @@ struct TexelPoint {
   // Set by the baker's push-out: one of its tangent-plane rays hit a surface within reach
   // (front or back), so the texel's footprint may be partly hidden by that geometry.
   bool nearSurface = false;
+  // Set by the baker on footprint grid points: the segment along the surface from the
+  // texel's main sample to this point crosses geometry (a wall, a solid's face), so the point
+  // lies inside a solid or on the far side of a wall and is not part of the texel's surface.
+  bool hidden = false;
 };
 
 struct TexelSample {
@@ -56,12 +60,16 @@ struct TexelSample {
   // of the page. May be empty for a sliver no grid point falls on: use `sample`.
   uint32_t firstSubsample = 0;
   uint32_t subsampleCount = 0;
-  // Set by the baker for texels next to geometry: the subsamples are a grid over the
-  // footprint, whose points inside a solid (TexelPoint::pushedOut) are hidden and left out of
-  // the texel's value (the mean over the visible part of the footprint).
-  bool footprintGrid = false;
+  // Set by the baker for texels next to geometry: a grid of points over the footprint,
+  // subsamples[firstGridPoint, firstGridPoint + gridPointCount), whose hidden points
+  // (TexelPoint::hidden) are left out of the texel's value (the mean over the visible part
+  // of the footprint). The supersampling points above stay, for a texel whose grid has no
+  // visible point. 0 = no grid.
+  uint32_t firstGridPoint = 0;
+  uint32_t gridPointCount = 0;
 
   bool valid() const { return object >= 0; }
+  bool footprintGrid() const { return gridPointCount > 0; }
 };
 
 struct RasterPage {

@@ -43,7 +43,8 @@ struct BakeOptions {
   std::optional<int> bounceCache;
   bool adaptive = false;
   bool coverageMap = false;
-  bool footprintGrid = false;
+  bool footprintGrid = false;    // --footprint-grid: the default, accepted
+  bool noFootprintGrid = false;  // --no-footprint-grid
   std::optional<float> resolution;
   std::optional<int> maxSize;
   std::optional<int> padding;
@@ -211,7 +212,7 @@ int runBake(const BakeOptions& options) {
   if (o.bounceCache) settings.bounceCacheSamples = *o.bounceCache;
   if (o.adaptive) settings.adaptiveSamples = true;
   if (o.coverageMap) settings.coverageMap = true;
-  if (o.footprintGrid) settings.footprintGrid = true;
+  if (o.noFootprintGrid) settings.footprintGrid = false;
   if (o.resolution) settings.resolution = *o.resolution;
   if (o.maxSize) settings.maxSize = *o.maxSize;
   if (o.padding) settings.padding = *o.padding;
@@ -338,9 +339,13 @@ void registerBakeCommand(CLI::App& app) {
   b->add_flag("--adaptive", o->adaptive,
               "With --bounce-cache: the same paths in total, given to texels in proportion to "
               "the spread the first pass measured (--samples on average, up to 8x)");
-  b->add_flag("--footprint-grid", o->footprintGrid,
-              "Texels next to geometry average the visible part of their footprint (4 x 4 "
-              "points; experimental: mixes both sides of thin walls)");
+  auto* grid = b->add_flag("--footprint-grid", o->footprintGrid,
+                           "Texels next to geometry average the visible part of their "
+                           "footprint, 4 x 4 points (the default)");
+  b->add_flag("--no-footprint-grid", o->noFootprintGrid,
+              "Texels next to geometry bake at their main sample point (or supersampling "
+              "points) alone, as kiln did before the footprint grid")
+      ->excludes(grid);
   b->add_flag("--coverage-map", o->coverageMap,
               "Also write lightmap-<i>_coverage.exr: the visible share of each texel's "
               "footprint (for comparisons with renderers that bake hidden points black)");
