@@ -141,7 +141,7 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["bounceCacheSamples"] = s.bounceCacheSamples;
   j["adaptiveSamples"] = s.adaptiveSamples;
   j["minSamples"] = s.minSamples;
-  j["errorFloor"] = shortestDecimal(s.errorFloor);
+  j["pilotSamples"] = s.pilotSamples;
   j["seed"] = s.seed;
   j["bounces"] = s.bounces;
   j["albedoBoost"] = shortestDecimal(s.albedoBoost);
