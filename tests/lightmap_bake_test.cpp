@@ -247,13 +247,19 @@ Scene furnaceRoom() {
   return scene;
 }
 
-TEST(LightmapBake, FurnaceRoomGivesLeOverOneMinusAlbedoWithAndWithoutBounceCache) {
-  const Scene scene = furnaceRoom();
+// The furnace room's bake settings: 12 texels per unit, denoiser off.
+LightmapBakeSettings furnaceSettings() {
   LightmapBakeSettings s;
   s.resolution = 12.0f;
   s.maxSize = 256;
-  s.samplesPerTexel = 64;
   s.denoise = false;
+  return s;
+}
+
+TEST(LightmapBake, FurnaceRoomGivesLeOverOneMinusAlbedoWithAndWithoutBounceCache) {
+  const Scene scene = furnaceRoom();
+  LightmapBakeSettings s = furnaceSettings();
+  s.samplesPerTexel = 64;
   for (int cache : {0, 16}) {
     s.bounceCacheSamples = cache;
     auto r = bakeLightmaps(scene, s);
@@ -293,13 +299,10 @@ void expectSameLightAndPaths(const LightmapBakeResult& a, const LightmapBakeResu
 
 TEST(LightmapBake, ErrorTargetMetAndUnbiasedInTheFurnaceRoom) {
   const Scene scene = furnaceRoom();
-  LightmapBakeSettings s;
-  s.resolution = 12.0f;
-  s.maxSize = 256;
+  LightmapBakeSettings s = furnaceSettings();
   s.samplesPerTexel = 4096;
   s.minSamples = 8;
   s.errorTarget = 0.03f;
-  s.denoise = false;
   for (int cache : {0, 16}) {
     s.bounceCacheSamples = cache;
     s.threads = 2;

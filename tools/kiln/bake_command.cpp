@@ -324,8 +324,8 @@ void registerBakeCommand(CLI::App& app) {
                 "Quality preset (default: the scene's extras.kiln.quality, else none)")
       ->check(CLI::IsMember({"preview", "low", "medium", "high", "production"}));
   b->add_option("--samples", o->samples,
-                "Paths per texel, the same for every texel (replaces the preset's error target); with "
-                "--error-target, the cap")
+                "Paths per texel, the same for every texel (replaces the preset's error "
+                "target); with --error-target, the cap")
       ->check(CLI::Range(1, 1 << 24));
   b->add_option("--error-target", o->errorTarget,
                 "Error target: the relative RMS error of the texels to aim at; a pilot pass on "

@@ -26,7 +26,8 @@ struct Loaded {
 
 kiln::Result<Loaded> load(const std::string& dir) {
   const std::filesystem::path path = std::filesystem::path(dir) / "manifest.json";
-  kiln::Result<kiln::Manifest> m = kiln::readManifestFile(path.string(), kiln::ManifestUse::kLightmaps);
+  kiln::Result<kiln::Manifest> m =
+      kiln::readManifestFile(path.string(), kiln::ManifestUse::kLightmaps);
   if (!m) return kiln::Error{m.error()};
   return Loaded{dir, std::move(m).value()};
 }
