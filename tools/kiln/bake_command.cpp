@@ -245,7 +245,11 @@ int runBake(const BakeOptions& options) {
       (settings.bounceCacheSamples == 0 || settings.errorTarget > 0.0f)) {
     printError(std::string("--adaptive allocates paths by the bounce cache's first pass: it "
                            "needs --bounce-cache N (N >= 1)") +
-               (settings.errorTarget > 0.0f ? " and no --error-target" : ""));
+               (settings.errorTarget > 0.0f
+                    ? o.errorTarget ? " and no --error-target"
+                                    : " and --samples N (the mean paths per texel: a preset "
+                                      "sets an error target, which allocates by its own rule)"
+                    : ""));
     return kExitBadUsage;
   }
   if (settings.maxSize < 1 + 2 * settings.padding) {
