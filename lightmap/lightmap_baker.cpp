@@ -35,6 +35,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <memory>
 
 #include "lightmap/directional.h"
@@ -53,11 +54,8 @@ namespace {
 constexpr uint64_t kAoTag = 0x616f;  // "ao": ambient occlusion rays' stream
 constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
 constexpr uint64_t kEnclosureTag = 0x656e;  // "en": enclosure rays' stream
-constexpr uint64_t kFloorTag = 0x666c;  // "fl": the error floor's pre-pass
+constexpr uint64_t kPilotTag = 0x706c;  // "pl": the error target's pilot pass
 constexpr uint64_t kCacheTag = 0x6263;  // "bc": the bounce cache's first pass
-// Error floor pre-pass: paths at every kFloorStride-th texel.
-constexpr size_t kFloorStride = 16;
-constexpr uint32_t kFloorSamples = 16;
 // Enclosure test: cosine-weighted rays per sample point (it stops at the first that
 // escapes, so an open point costs one or two rays).
 constexpr uint32_t kEnclosureRays = 32;
@@ -95,6 +93,11 @@ Status validate(const LightmapBakeSettings& s) {
                " is fewer than the supersampling's " +
                std::to_string(s.supersampling * s.supersampling) +
                " points per texel (every point needs a sample)");
+  if (!(s.errorTarget >= 0.0f) || !std::isfinite(s.errorTarget))
+    return bad("errorTarget must be >= 0 (got " + std::to_string(s.errorTarget) + ")");
+  if (s.errorTarget > 0.0f && (s.minSamples < 1 || s.pilotSamples < 1))
+    return bad("with an errorTarget, minSamples and pilotSamples must be >= 1 (got " +
+               std::to_string(s.minSamples) + " and " + std::to_string(s.pilotSamples) + ")");
   if (s.bounces < 0) return bad("bounces must be >= 0 (got " + std::to_string(s.bounces) + ")");
   if (s.bounceCacheSamples < 0)
     return bad("bounceCacheSamples must be >= 0 (got " + std::to_string(s.bounceCacheSamples) +
@@ -396,10 +399,7 @@ bool lightReaches(const Light& light, vec3 p) {
 }
 
 struct LightSettings {
-  uint32_t samples = 1;     // paths per texel; with an error target, the cap
-  uint32_t firstRound = 1;  // with an error target: the first round's paths (then doubling)
-  float errorTarget = 0.0f;  // relative standard error a texel stops at; 0 = fixed count
-  float errorFloor = 0.0f;   // absolute floor added to the texel's luminance (E / pi)
+  uint32_t samples = 1;     // paths per texel
   int supersampling = 1;
   uint64_t seed = 0;
   float backfaceTolerance = 0.5f;
@@ -412,6 +412,8 @@ struct LightSettings {
   // Per covered texel (index-aligned with the light stage's texels), its paths instead of
   // `samples` (allocateSamples); null = `samples` everywhere.
   const std::vector<uint32_t>* texelSamples = nullptr;
+  // Every texel at its main sample point only (the error target's pilot pass).
+  bool mainPointOnly = false;
 };
 
 // Running sums over sample points (each term x the point's sample count).
@@ -460,28 +462,26 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
   return true;
 }
 
-// Stage 5, one set of points of a texel, in rounds. Round r adds samples [N_r, N_{r+1}) of
-// the texel's stream (N_0 = 0, N_1 = the first round's count, then doubling up to the cap),
-// split evenly over the points (point i takes [N_r + i D / k, N_r + (i + 1) D / k), D =
-// N_{r+1} - N_r), so the union of the texel's paths is always one Sobol prefix [0, N)
-// whatever the number of rounds. Each round is kVarianceBatches batches, batch b holding
+// Stage 5, one set of points of a texel: s.samples paths of the texel's stream [0, N), split
+// evenly over the points (point i takes [i N / k, (i + 1) N / k)), so the union of the
+// texel's paths is one Sobol prefix. They run as kVarianceBatches batches, batch b holding
 // slice b of every point's share (so a batch mean is over the whole texel, not one point),
-// and the spread of all batch means gives the variance of the texel's mean. With an error
-// target, the texel stops when that standard error is at most target x (luminance + floor)
-// (Beast's final gather contrast threshold, relative to the texel plus an absolute floor so
-// that dark texels do not take the cap); without one, one round of s.samples.
+// and the spread of the batch means gives the variance of the texel's mean (for the
+// denoiser). How many paths a texel takes is decided before it starts (a fixed count, or the
+// error target's pilot pass, allocateSamples), never from its own paths: a rule that stops
+// where the texel's own paths happen to agree biases it dark.
 // Every decision uses this texel's own samples: the result does not depend on threads.
 //
-// Points inside geometry (back-face share > tolerance after the first round, or enclosed)
-// are left out of a valid texel's value, which is then the mean over the texel's unoccluded
-// points (what a visible surface point near the texel sees); later rounds skip them. With
-// `footprintGrid` the points are a grid over the texel's footprint (TexelSample::
-// firstGridPoint) whose hidden points (TexelPoint::hidden: across a wall or inside a solid
-// from the texel's main sample) are never traced: the texel holds the mean over the visible
-// part of its footprint, and `coverage` is that part's share. With no visible point the
-// result is invalid; its value is then the plain mean over all its points (the physical
-// irradiance of a surface enclosed by geometry, ~0: paths end at back faces, shadow rays
-// are blocked), which it keeps unless it is next to a valid texel (postPage).
+// Points inside geometry (back-face share > tolerance, or enclosed) are left out of a valid
+// texel's value, which is then the mean over the texel's unoccluded points (what a visible
+// surface point near the texel sees). With `footprintGrid` the points are a grid over the
+// texel's footprint (TexelSample::firstGridPoint) whose hidden points (TexelPoint::hidden:
+// across a wall or inside a solid from the texel's main sample) are never traced: the texel
+// holds the mean over the visible part of its footprint, and `coverage` is that part's
+// share. With no visible point the result is invalid; its value is then the plain mean over
+// all its points (the physical irradiance of a surface enclosed by geometry, ~0: paths end
+// at back faces, shadow rays are blocked), which it keeps unless it is next to a valid
+// texel (postPage).
 TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uint64_t key,
                        const TexelPoint* points, uint32_t pointCount, bool footprintGrid,
                        float enclosedReach, uint64_t& extraRays) {
@@ -553,66 +553,32 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
     return double(luminance(e)) * double(count);
   };
 
-  const uint32_t cap = std::max(s.samples, 1u);
-  const uint32_t firstRound = s.errorTarget > 0.0f ? std::max(s.firstRound, 1u) : cap;
-  uint32_t done = 0;
-  double meanLum = 0.0, varMean = 0.0;
-  for (int round = 0; done < cap; ++round) {
-    const uint32_t target = round == 0 ? std::min(cap, firstRound) : std::min(cap, 2 * done);
-    const uint32_t d = target - done;
-    // The points still in use this round (a point found inside after the first round is
-    // dropped from a texel that has other points).
-    std::vector<uint32_t> use;
-    for (uint32_t j = 0; j < k; ++j)
-      if (!inside[j]) use.push_back(j);
-    if (use.empty())
-      for (uint32_t j = 0; j < k; ++j) use.push_back(j);
-    const uint32_t m = uint32_t(use.size());
-    for (uint32_t b = 0; b < kVarianceBatches; ++b) {
-      double lum = 0.0;
-      uint32_t n = 0;
-      for (uint32_t u = 0; u < m; ++u) {
-        const uint32_t first = done + uint32_t(uint64_t(u) * d / m);
-        const uint32_t count = done + uint32_t(uint64_t(u + 1) * d / m) - first;
-        // On a footprint grid with fewer paths per point than batches (16 points at 16
-        // paths: one each), slice b of every point would put all of them in the last batch,
-        // leaving one batch and no variance for the denoiser; point u's slices are then
-        // rotated by u, so the points' paths spread over the batches.
-        const uint32_t slice =
-            footprintGrid && count < kVarianceBatches ? (b + u) % kVarianceBatches : b;
-        const uint32_t bFirst = first + slice * count / kVarianceBatches;
-        const uint32_t bCount = first + (slice + 1) * count / kVarianceBatches - bFirst;
-        if (bCount == 0) continue;
-        lum += run(use[u], bFirst, bCount);
-        n += bCount;
-      }
-      if (n > 0) batches.push_back({lum / double(n) * kInvPi, n});
+  const uint32_t paths = std::max(s.samples, 1u);
+  for (uint32_t b = 0; b < kVarianceBatches; ++b) {
+    double lum = 0.0;
+    uint32_t n = 0;
+    for (uint32_t j = 0; j < k; ++j) {
+      const uint32_t first = uint32_t(uint64_t(j) * paths / k);
+      const uint32_t count = uint32_t(uint64_t(j + 1) * paths / k) - first;
+      // On a footprint grid with fewer paths per point than batches (16 points at 16
+      // paths: one each), slice b of every point would put all of them in the last batch,
+      // leaving one batch and no variance for the denoiser; point j's slices are then
+      // rotated by j, so the points' paths spread over the batches.
+      const uint32_t slice =
+          footprintGrid && count < kVarianceBatches ? (b + j) % kVarianceBatches : b;
+      const uint32_t bFirst = first + slice * count / kVarianceBatches;
+      const uint32_t bCount = first + (slice + 1) * count / kVarianceBatches - bFirst;
+      if (bCount == 0) continue;
+      lum += run(j, bFirst, bCount);
+      n += bCount;
     }
-    done = target;
-    if (round == 0) {
-      // Validity from the first round's rays.
-      for (uint32_t j = 0; j < k; ++j)
-        inside[j] = float(backFaces[j]) > s.backfaceTolerance * float(sums[j].samples) ||
-                    enclosed(integrator, points[active[j]], enclosedReach,
-                             hashValues(key, active[j]), extraRays);
-    }
-    // Mean and variance of the mean over the points in use (batches of unequal sizes:
-    // sigma^2 = sum n_b (m_b - m)^2 / (B - 1), var(mean) = sigma^2 / N).
-    PointSums used;
-    for (uint32_t j = 0; j < k; ++j)
-      if (!inside[j]) used.add(sums[j]);
-    if (used.samples == 0) break;  // invalid: no more rounds
-    meanLum = luminance(vec3(used.light / double(used.samples))) * kInvPi;
-    if (!(s.errorTarget > 0.0f)) continue;
-    if (batches.size() < 2) continue;
-    double ss = 0.0, total = 0.0;
-    for (const auto& [l, n] : batches) {
-      ss += double(n) * (l - meanLum) * (l - meanLum);
-      total += n;
-    }
-    varMean = ss / double(batches.size() - 1) / total;
-    if (std::sqrt(varMean) <= double(s.errorTarget) * (meanLum + double(s.errorFloor))) break;
+    if (n > 0) batches.push_back({lum / double(n) * kInvPi, n});
   }
+  // Validity from the texel's rays.
+  for (uint32_t j = 0; j < k; ++j)
+    inside[j] = float(backFaces[j]) > s.backfaceTolerance * float(sums[j].samples) ||
+                enclosed(integrator, points[active[j]], enclosedReach, hashValues(key, active[j]),
+                         extraRays);
 
   PointSums used, all;
   for (uint32_t j = 0; j < k; ++j) {
@@ -623,7 +589,7 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
       if (!points[active[j]].pushedOut) out.onVisibleSurface = true;
     }
   }
-  out.samples = done;
+  out.samples = paths;
   out.valid = used.samples > 0;
   const PointSums& total = out.valid ? used : all;
   if (total.samples == 0) return out;
@@ -742,36 +708,6 @@ float qmcVarianceFactor(const std::vector<TexelRef>& texels, const std::vector<T
   return float(q * q);
 }
 
-// The scene's mean texel luminance (E / pi), for the adaptive error floor: kFloorSamples
-// paths at the main sample of every kFloorStride-th texel, summed in texel order (so the
-// same at any thread count). Its paths use their own stream and are not reused.
-double meanTexelLuminance(const std::vector<RasterPage>& pages,
-                          const std::vector<TexelRef>& texels, const Integrator& integrator,
-                          uint64_t seed, ParallelOptions options, std::atomic<uint64_t>& rays) {
-  const size_t count = (texels.size() + kFloorStride - 1) / kFloorStride;
-  std::vector<double> lum(count, 0.0);
-  options.progress = nullptr;
-  options.grain = 16;
-  parallelFor(
-      count,
-      [&](size_t begin, size_t end) {
-        const uint64_t before = Integrator::threadRayCount();
-        for (size_t i = begin; i < end; ++i) {
-          const TexelRef& t = texels[i * kFloorStride];
-          const TexelPoint& p = pages[t.page].texels[t.index].sample;
-          const uint64_t key = hashValues(hashValues(seed, t.page, t.index), kFloorTag);
-          lum[i] = double(luminance(
-                       integrator.irradiance(p.position, p.normal, key, 0, kFloorSamples).total())) *
-                   kInvPi;
-        }
-        rays += Integrator::threadRayCount() - before;
-      },
-      options);
-  double sum = 0.0;
-  for (double l : lum) sum += l;
-  return count ? sum / double(count) : 0.0;
-}
-
 // Texels per tile of a distributed bake (consecutive covered texels: row strips).
 constexpr size_t kTexelTile = 64;
 
@@ -785,10 +721,11 @@ WorkSplit splitTexels(std::vector<RasterPage>& pages, const std::vector<TexelRef
   return splitWork(texels.size(), kTexelTile, [&](size_t i) {
     RasterPage& page = pages[texels[i].page];
     TexelSample& texel = page.texels[texels[i].index];
-    // A footprint grid's visible points (its fallback to the texel's own points is rare).
-    const uint32_t points =
-        texel.footprintGrid() ? texel.gridPointCount
-                              : texelPoints(page, texel, s.supersampling).second;
+    // A footprint grid's visible points (its fallback to the texel's own points is rare);
+    // the pilot pass traces the main sample only.
+    const uint32_t points = s.mainPointOnly         ? 1u
+                            : texel.footprintGrid() ? texel.gridPointCount
+                                                    : texelPoints(page, texel, s.supersampling).second;
     // Adaptive sampling's own count per texel, as the light stage uses it.
     const uint32_t samples = s.texelSamples ? std::max((*s.texelSamples)[i], points) : s.samples;
     return double(samples) * perSample + double(points) * double(kEnclosureRays);
@@ -818,8 +755,12 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
         for (size_t i = begin; i < end; ++i) {
           RasterPage& page = pages[texels[i].page];
           TexelSample& texel = page.texels[texels[i].index];
-          const auto [points, count] = texelPoints(page, texel, s.supersampling);
-          const auto [grid, gridCount] = gridPoints(page, texel);
+          const auto [points, count] = s.mainPointOnly
+                                           ? std::pair<TexelPoint*, uint32_t>{&texel.sample, 1u}
+                                           : texelPoints(page, texel, s.supersampling);
+          const auto [grid, gridCount] = s.mainPointOnly
+                                             ? std::pair<TexelPoint*, uint32_t>{nullptr, 0u}
+                                             : gridPoints(page, texel);
           const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
@@ -1145,25 +1086,19 @@ std::unique_ptr<LightmapBounceCache> bounceCachePass(
   return std::make_unique<LightmapBounceCache>(scene, layout, std::move(images));
 }
 
-// Adaptive sampling (LightmapBakeSettings::adaptiveSamples): paths per texel in proportion
-// to the spread of one path's value there, Neyman's allocation, which minimises the summed
-// squared error of the texels for a given total of paths (sum sigma_t^2 / n_t subject to
-// sum n_t = N: n_t ~ sigma_t). The spread comes from the bounce cache's first pass, whose
-// random numbers are its own: a texel's count does not depend on the paths that make its
-// value, so stopping where a few paths happened to agree cannot bias it dark (what sinks a
-// per-texel stopping rule). Each spread is the mean over the valid texels of its object
-// among its 3 x 3 neighbours (the first pass has few paths per texel; invalid texels say
-// nothing about the light beside them). The counts are clamped to [mean / 2,
-// cap] and scaled (bisection on the factor) so that their sum is mean x texels; computed in
-// texel order, so the same at any thread count.
-std::vector<uint32_t> allocateSamples(const std::vector<RasterPage>& pages,
-                                      const std::vector<TexelRef>& texels,
-                                      const std::vector<float>& pathSpread, uint32_t mean,
-                                      uint32_t cap) {
+// Each covered texel's mean of `value` over the texels of its object among its 3 x 3
+// neighbours (itself included) that have one (value >= 0; -1 = none, e.g. an invalid texel,
+// which says nothing about the light beside it); 0 when none has. The passes that measure
+// the light for the allocation below take few paths per texel: their neighbours' agree with
+// them on smooth light and add up to 9x the paths. In texel order: the same at any thread
+// count.
+std::vector<double> neighbourMean(const std::vector<RasterPage>& pages,
+                                  const std::vector<TexelRef>& texels,
+                                  const std::vector<float>& value) {
   std::vector<std::vector<int32_t>> where(pages.size());  // texel -> index in `texels`
   for (size_t p = 0; p < pages.size(); ++p) where[p].assign(pages[p].texels.size(), -1);
   for (size_t i = 0; i < texels.size(); ++i) where[texels[i].page][texels[i].index] = int32_t(i);
-  std::vector<double> spread(texels.size(), 0.0);
+  std::vector<double> mean(texels.size(), 0.0);
   for (size_t i = 0; i < texels.size(); ++i) {
     const RasterPage& page = pages[texels[i].page];
     const int w = page.width, h = page.height;
@@ -1175,50 +1110,141 @@ std::vector<uint32_t> allocateSamples(const std::vector<RasterPage>& pages,
         const int nx = x + dx, ny = y + dy;
         if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
         const int32_t j = where[texels[i].page][size_t(ny) * size_t(w) + size_t(nx)];
-        if (j < 0 || pathSpread[size_t(j)] < 0.0f ||
+        if (j < 0 || value[size_t(j)] < 0.0f ||
             page.texels[texels[size_t(j)].index].object != page.texels[texels[i].index].object)
           continue;
-        sum += pathSpread[size_t(j)];
+        sum += value[size_t(j)];
         ++n;
       }
-    spread[i] = n > 0 ? sum / n : 0.0;
+    mean[i] = n > 0 ? sum / n : 0.0;
   }
-  const uint32_t lo = std::max(1u, mean / 2);
-  const double target = double(mean) * double(texels.size());
-  auto total = [&](double k) {
-    double t = 0.0;
-    for (double s : spread) t += std::clamp(std::round(k * s), double(lo), double(cap));
-    return t;
+  return mean;
+}
+
+// Paths per texel in proportion to the spread of one path's value there (Neyman's
+// allocation, which minimises the summed squared error of the texels for a given total of
+// paths: sum sigma_t^2 / n_t subject to sum n_t = N gives n_t ~ sigma_t), n_t =
+// clamp(round(k sigma_t), lo, cap), with the smallest k (bisection) that reaches the goal:
+//   - adaptive sampling (LightmapBakeSettings::adaptiveSamples; `target` 0): the counts sum
+//     to meanCount x texels; the spread comes from the bounce cache's first pass;
+//   - the error target (LightmapBakeSettings::errorTarget = `target` > 0): the relative RMSE
+//     over the texels the counts predict, sqrt(sum sigma_t^2 / n_t / sum mu_t^2), is at most
+//     the target (mu_t = `pilotMean`); the spread and means come from the pilot pass.
+// Both passes have random numbers of their own: a texel's count does not depend on the paths
+// that make its value, so it cannot bias it (a rule that stops where the texel's own paths
+// happen to agree stops low: kiln's first error target did, and darkened). Spreads and means
+// are the mean over each texel's valid neighbours (neighbourMean). Computed in texel order:
+// the same at any thread count.
+std::vector<uint32_t> allocateSamples(const std::vector<RasterPage>& pages,
+                                      const std::vector<TexelRef>& texels,
+                                      const std::vector<float>& pathSpread, uint32_t lo,
+                                      uint32_t cap, double meanCount, double target = 0.0,
+                                      const std::vector<float>* pilotMean = nullptr) {
+  const std::vector<double> spread = neighbourMean(pages, texels, pathSpread);
+  auto count = [&](double k, size_t i) {
+    return std::clamp(std::round(k * spread[i]), double(lo), double(cap));
   };
+  std::function<bool(double)> reached;
+  if (target > 0.0) {
+    const std::vector<double> mean = neighbourMean(pages, texels, *pilotMean);
+    double sumSq = 0.0;
+    for (double m : mean) sumSq += m * m;
+    const double allowed = target * target * sumSq;
+    reached = [&, allowed](double k) {
+      double variance = 0.0;
+      for (size_t i = 0; i < spread.size(); ++i) variance += spread[i] * spread[i] / count(k, i);
+      return variance <= allowed;
+    };
+  } else {
+    const double total = meanCount * double(texels.size());
+    reached = [&, total](double k) {
+      double t = 0.0;
+      for (size_t i = 0; i < spread.size(); ++i) t += count(k, i);
+      return t >= total;
+    };
+  }
   double kLo = 0.0, kHi = 1.0;
-  while (total(kHi) < target && kHi < 1e30) kHi *= 2.0;
+  while (!reached(kHi) && kHi < 1e30) kHi *= 2.0;
   for (int it = 0; it < 60; ++it) {
     const double k = 0.5 * (kLo + kHi);
-    (total(k) < target ? kLo : kHi) = k;
+    (reached(k) ? kHi : kLo) = k;
   }
+  // Adaptive sampling keeps the bisection's lower end (its sum may fall short of the mean
+  // by rounding); the error target the upper one, which reaches the target.
+  const double k = target > 0.0 ? kHi : kLo;
   std::vector<uint32_t> counts(texels.size());
-  for (size_t i = 0; i < texels.size(); ++i)
-    counts[i] = uint32_t(std::clamp(std::round(kLo * spread[i]), double(lo), double(cap)));
+  for (size_t i = 0; i < texels.size(); ++i) counts[i] = uint32_t(count(k, i));
   return counts;
+}
+
+// The error target's pilot pass: LightmapBakeSettings::pilotSamples paths at every texel's
+// main sample point on their own stream, through the bake's own integrator (with the bounce
+// cache when there is one, so that it measures the spread of the paths the bake will take),
+// light only. The main point alone keeps the pass at pilotSamples paths a texel whatever the
+// supersampling or footprint grid (its paths at every point of a 4 x 4 grid cost more than
+// the light of a preview); the spread there stands for that of the texel's points, which
+// the light stage's estimate splits its paths over (a little more than theirs, since the
+// stage stratifies over the points).
+// `pathSpread` and `mean` receive per texel the standard deviation of one
+// path's luminance (E / pi) and the mean luminance, -1 where the pass found the texel
+// invalid. Every rank of a distributed bake allocates from it: the light goes to all.
+// Returns false when cancelled.
+bool pilotPass(std::vector<RasterPage>& pages, const std::vector<TexelRef>& texels,
+               const Integrator& integrator, const LightmapBakeSettings& settings,
+               const AtlasLayout& layout, bool showProgress, ParallelOptions parallel,
+               std::atomic<uint64_t>& rays, std::vector<float>& pathSpread,
+               std::vector<float>& mean) {
+  LightSettings ls;
+  ls.samples = uint32_t(settings.pilotSamples);
+  ls.supersampling = 1;
+  ls.mainPointOnly = true;
+  ls.seed = hashValues(settings.seed, kPilotTag);
+  ls.backfaceTolerance = settings.backfaceTolerance;
+  ls.enclosedTexels = settings.enclosedTexels;
+  ls.layout = &layout;
+  std::vector<TexelLight> light;
+  if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays, "pilot",
+                  true))
+    return false;
+  pathSpread.assign(texels.size(), -1.0f);
+  mean.assign(texels.size(), -1.0f);
+  for (size_t i = 0; i < texels.size(); ++i)
+    if (light[i].valid) {
+      pathSpread[i] = std::sqrt(light[i].variance * float(light[i].samples));
+      mean[i] = luminance(light[i].value);
+    }
+  return true;
 }
 
 }  // namespace
 
 Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& settings) {
+  // Error targets with a cap (LightmapBakeSettings::errorTarget). Each step halves the target
+  // (4x the paths) and quadruples the cap and the minimum; supersampling starts at "high",
+  // where 2 x 2 points per texel resolve shadow edges inside a texel at no extra path cost,
+  // while below it every path is better spent on noise. The targets are the relative RMS
+  // error (before denoising) of the fixed counts they replace (preview 16, low 64, medium 256,
+  // high 1024, production 4096 paths per texel) on the Cornell box, the project's reference
+  // scene; the cap is 4x and the minimum 1/8 of that count (at least 8). Scenes whose light
+  // is easier now stop at the target with fewer paths (docs/lightmap_outputs.md "Quality
+  // presets").
   struct Preset {
     const char* name;
-    int samples;
-    int supersampling;
+    float target;
+    int minSamples, cap, supersampling, pilot;
   };
-  static constexpr Preset kPresets[] = {{"preview", 16, 1},
-                                        {"low", 64, 1},
-                                        {"medium", 256, 1},
-                                        {"high", 1024, 2},
-                                        {"production", 4096, 2}};
+  static constexpr Preset kPresets[] = {{"preview", 0.12f, 8, 64, 1, 4},
+                                        {"low", 0.06f, 8, 256, 1, 4},
+                                        {"medium", 0.03f, 32, 1024, 1, 8},
+                                        {"high", 0.015f, 128, 4096, 2, 8},
+                                        {"production", 0.0075f, 512, 16384, 2, 8}};
   for (const Preset& p : kPresets) {
     if (preset != p.name) continue;
-    settings.samplesPerTexel = p.samples;
+    settings.errorTarget = p.target;
+    settings.minSamples = p.minSamples;
+    settings.samplesPerTexel = p.cap;
     settings.supersampling = p.supersampling;
+    settings.pilotSamples = p.pilot;
     return Status::success();
   }
   return Error{"unknown quality preset \"" + preset +
@@ -1327,14 +1353,6 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   const Integrator integrator(result.scene, **tracer, is);
   LightSettings ls;
   ls.samples = uint32_t(settings.samplesPerTexel);
-  if (settings.errorTarget > 0.0f) {
-    ls.errorTarget = settings.errorTarget;
-    ls.firstRound = uint32_t(std::min(settings.minSamples, settings.samplesPerTexel));
-    result.stats.meanLuminance =
-        meanTexelLuminance(pages, texels, integrator, settings.seed, parallel, rays);
-    ls.errorFloor = float(settings.errorFloor * result.stats.meanLuminance);
-    if (cancelled(cancel)) return Error{"cancelled"};
-  }
   ls.supersampling = settings.supersampling;
   ls.seed = settings.seed;
   ls.backfaceTolerance = settings.backfaceTolerance;
@@ -1345,9 +1363,19 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   ls.directional = settings.directional;
   ls.shadowmask = withShadowmask ? &shadowmaskLights : nullptr;
   std::vector<uint32_t> texelSamples;
-  if (settings.adaptiveSamples && bounceCache && !(settings.errorTarget > 0.0f)) {
-    texelSamples = allocateSamples(pages, texels, pathSpread, ls.samples,
-                                   ls.samples * kAdaptiveCap);
+  if (settings.errorTarget > 0.0f) {
+    std::vector<float> pilotMean;
+    if (!pilotPass(pages, texels, integrator, settings, result.layout, showProgress, parallel,
+                   rays, pathSpread, pilotMean) ||
+        cancelled(cancel))
+      return Error{"cancelled"};
+    texelSamples = allocateSamples(
+        pages, texels, pathSpread, uint32_t(std::clamp(settings.minSamples, 1, int(ls.samples))),
+        ls.samples, 0.0, settings.errorTarget, &pilotMean);
+    ls.texelSamples = &texelSamples;
+  } else if (settings.adaptiveSamples && bounceCache) {
+    texelSamples = allocateSamples(pages, texels, pathSpread, std::max(1u, ls.samples / 2),
+                                   ls.samples * kAdaptiveCap, ls.samples);
     ls.texelSamples = &texelSamples;
   }
   std::vector<TexelLight> light;

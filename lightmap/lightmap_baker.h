@@ -49,15 +49,22 @@ struct LightmapBakeSettings {
   // Sampling.
   // Paths per texel (split over the supersamples); with errorTarget > 0, the cap.
   int samplesPerTexel = 256;
-  // Adaptive sampling (lightmap_baker.cpp, lightTexel): > 0 = each texel takes paths in
-  // rounds (minSamples, then doubling up to samplesPerTexel) until the standard error of its
-  // mean, from the spread of its batch means, is at most errorTarget x (its luminance +
-  // errorFloor x the scene's mean texel luminance). Smooth, bright texels stop early, texels
-  // whose paths disagree (penumbrae, caustic-like indirect light, dark corners up to the
-  // floor) take more. 0 = every texel takes samplesPerTexel paths.
+  // Error target (lightmap_baker.cpp, pilotPass and allocateSamples): > 0 = a pilot pass
+  // of pilotSamples paths (main sample point) on its own random stream measures, at every
+  // texel, the spread sigma of one path's luminance and its mean mu (each averaged over its
+  // valid 3 x 3 neighbours of the same object); the texels then take paths in proportion to
+  // sigma (Neyman's allocation, as adaptiveSamples), clamped to [minSamples,
+  // samplesPerTexel], with the fewest in total for which the relative RMS error they
+  // predict over the texels, sqrt(sum sigma^2 / n / sum mu^2), is at most errorTarget. The
+  // pilot's paths do not enter any texel's value and the counts depend only on them, so the
+  // estimate is unbiased (a stopping rule on the texel's own paths, kiln's first error
+  // target, was not: it stopped where a few paths agreed, and darkened). The prediction
+  // assumes plain Monte Carlo's 1 / n; the Sobol paths and the denoiser do better, so the
+  // output's error is at most the target where the cap does not bind.
+  // 0 = every texel takes samplesPerTexel paths.
   float errorTarget = 0.0f;
   int minSamples = 32;
-  float errorFloor = 0.1f;
+  int pilotSamples = 8;       // at each texel's main sample point, with errorTarget > 0
   int supersampling = 1;      // n x n sample points per texel
   // Final gather (lightmap_baker.cpp, bounceCachePass): > 0 = a first pass bakes every
   // texel with this many full paths (post-processed like the light: filled, dilated,
@@ -119,11 +126,9 @@ struct LightmapBakeSettings {
 
 // Applies a quality preset ("preview", "low", "medium", "high", "production") to the
 // sampling settings. Returns an error naming the valid presets for an unknown name.
-// Presets (samplesPerTexel, supersampling): preview (16, 1), low (64, 1), medium (256, 1),
-// high (1024, 2), production (4096, 2). Each step is 4x the paths, i.e. half the noise
-// (1 / sqrt(samples), lightmap_bake_test); supersampling starts at "high", where 2 x 2
-// points per texel (256 or 1024 paths each) resolve shadow edges inside a texel at no extra
-// path cost, while below it every path is better spent on noise.
+// Presets are error targets with a cap (errorTarget, minSamples, samplesPerTexel as the cap,
+// supersampling; docs/lightmap_outputs.md "Quality presets" for how they were chosen and
+// what they cost against the fixed counts they replace).
 Status applyLightmapPreset(const std::string& preset, LightmapBakeSettings& settings);
 
 struct LightmapPageResult {
@@ -173,9 +178,6 @@ struct LightmapBakeStats {
   double meanSamples = 0.0;
   // Texels whose stage 5 traced [2^b, 2^(b+1)) rays, b = 0..31 (bucket 0 also holds 0 rays).
   std::array<uint64_t, 32> raysPerTexelHistogram{};
-  // The scene's mean texel luminance (E / pi) the adaptive error floor is relative to; 0
-  // without adaptive sampling.
-  double meanLuminance = 0.0;
   double seconds = 0.0;     // wall time of the stages that trace them (push-out and light)
 };
 

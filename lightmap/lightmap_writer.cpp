@@ -142,7 +142,7 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["adaptiveSamples"] = s.adaptiveSamples;
   j["footprintGrid"] = s.footprintGrid;
   j["minSamples"] = s.minSamples;
-  j["errorFloor"] = shortestDecimal(s.errorFloor);
+  j["pilotSamples"] = s.pilotSamples;
   j["seed"] = s.seed;
   j["bounces"] = s.bounces;
   j["albedoBoost"] = shortestDecimal(s.albedoBoost);

@@ -246,7 +246,11 @@ int runBake(const BakeOptions& options) {
       (settings.bounceCacheSamples == 0 || settings.errorTarget > 0.0f)) {
     printError(std::string("--adaptive allocates paths by the bounce cache's first pass: it "
                            "needs --bounce-cache N (N >= 1)") +
-               (settings.errorTarget > 0.0f ? " and no --error-target" : ""));
+               (settings.errorTarget > 0.0f
+                    ? o.errorTarget ? " and no --error-target"
+                                    : " and --samples N (the mean paths per texel: a preset "
+                                      "sets an error target, which allocates by its own rule)"
+                    : ""));
     return kExitBadUsage;
   }
   if (settings.maxSize < 1 + 2 * settings.padding) {
@@ -325,12 +329,14 @@ void registerBakeCommand(CLI::App& app) {
                 "Quality preset (default: the scene's extras.kiln.quality, else none)")
       ->check(CLI::IsMember({"preview", "low", "medium", "high", "production"}));
   b->add_option("--samples", o->samples,
-                "Paths per texel, the same for every texel (overrides the preset's count); with "
-                "--error-target, the cap")
+                "Paths per texel, the same for every texel (replaces the preset's error "
+                "target); with --error-target, the cap")
       ->check(CLI::Range(1, 1 << 24));
   b->add_option("--error-target", o->errorTarget,
-                "Adaptive sampling: each texel takes paths until the standard error of its "
-                "mean is at most this share of its value (plus a floor); 0 = off")
+                "Error target: the relative RMS error of the texels to aim at; a pilot pass on "
+                "its own random numbers measures each texel's spread, and texels get paths in "
+                "proportion to it (at least the preset's minimum, 32 without one, at most "
+                "--samples); unbiased; 0 = off")
       ->check(CLI::Range(0.0f, 1.0f));
   b->add_option("--bounce-cache", o->bounceCache,
                 "Final gather: a first pass of this many paths per texel, whose light the "
