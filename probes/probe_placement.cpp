@@ -361,11 +361,24 @@ float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, flo
   return std::sqrt(diff / 6.0f) / std::max(std::sqrt(ref / 6.0f), floor);
 }
 
+float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+  float diff = 0.0f, ref = 0.0f, est = 0.0f;
+  for (const vec3& n : kAxisNormals) {
+    const float t = luminance(truth.irradiance(n));
+    const float e = luminance(estimate.irradiance(n));
+    diff += (e - t) * (e - t);
+    ref += t * t;
+    est += e * e;
+  }
+  return std::sqrt(diff / 6.0f) / std::max({std::sqrt(ref / 6.0f), std::sqrt(est / 6.0f), floor});
+}
+
 FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
                              std::span<const ShL2Rgb> truth, float floor, int threads,
-                             const ProbeBlendSettings& blend) {
+                             const ProbeBlendSettings& blend, std::vector<ShL2Rgb>* estimates) {
   FieldError out;
   out.perPoint.assign(points.size(), 0.0f);
+  if (estimates) estimates->assign(points.size(), ShL2Rgb{});
   ParallelOptions options;
   options.threads = threads;
   options.grain = 64;
@@ -376,7 +389,9 @@ FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
         for (size_t i = begin; i < end; ++i) {
           const ProbeLocation loc = locateProbe(set, points[i], hint, blend);
           hint = loc.cell;
-          out.perPoint[i] = relativeIrradianceError(truth[i], interpolateProbes(set, loc), floor);
+          const ShL2Rgb estimate = interpolateProbes(set, loc);
+          out.perPoint[i] = relativeIrradianceError(truth[i], estimate, floor);
+          if (estimates) (*estimates)[i] = estimate;
         }
       },
       options);
@@ -631,6 +646,9 @@ class ProbePlacer {
   // estimate. `field` holds the error at every check point (the pick points too).
   struct Scored {
     FieldError field;
+    // With symmetricPicks, per check point: the error relative to the larger of the truth's
+    // and the estimate's light (symmetricIrradianceError), a second ranking for growth.
+    std::vector<float> pickError;
     float leak = 0.0f;
     float score = 0.0f;
   };
@@ -653,7 +671,7 @@ class ProbePlacer {
   std::optional<Scored> evaluate(const std::vector<uint32_t>& sel);
   std::optional<float> leakOfSelection(const std::vector<uint32_t>& sel);
   std::vector<uint32_t> startSet(bool withCorners) const;
-  std::vector<uint32_t> pickOrder() const;
+  std::vector<uint32_t> pickOrder(const std::vector<float>& error) const;
   void takeSnapshots(const std::vector<uint32_t>& bestSoFar);
   int64_t nearestCandidate(vec3 p, const std::vector<uint32_t>& exclude) const;
   bool addSpawned(const std::vector<vec3>& spawned);
@@ -957,7 +975,11 @@ std::optional<ProbePlacer::Scored> ProbePlacer::evaluate(const std::vector<uint3
     }
   }
   Scored out;
-  out.field = measureFieldError(*set, checks_, truth_, floor_, settings_.threads);
+  std::vector<ShL2Rgb> estimates;
+  out.field = measureFieldError(*set, checks_, truth_, floor_, settings_.threads, {},
+                                settings_.symmetricPicks ? &estimates : nullptr);
+  for (size_t i = 0; i < estimates.size(); ++i)
+    out.pickError.push_back(symmetricIrradianceError(truth_[i], estimates[i], floor_));
   double sum = 0.0;
   size_t n = 0;
   for (size_t i = 0; i < checks_.size(); ++i)
@@ -1154,45 +1176,74 @@ void ProbePlacer::grow() {
     batch = std::min(batch, settings_.budget - uint32_t(selected_.size()));
     if (!snapshotsLeft_.empty() && snapshotsLeft_.front() > selected_.size())
       batch = std::min(batch, snapshotsLeft_.front() - uint32_t(selected_.size()));
-    std::vector<uint32_t> picks;
-    std::vector<vec3> pickPositions, spawned;
-    for (uint32_t j : pickOrder()) {
-      if (picks.size() >= batch) break;
-      bool covered = false;
-      for (const vec3& q : pickPositions)
-        covered = covered || glm::length(q - checks_[j]) < exclusion;
-      if (covered) continue;
-      const int64_t c = nearestCandidate(checks_[j], picks);
-      // No candidate near the bad point (open air, where the octree is coarse): a new probe
-      // at the point itself (it is valid: check points are), baked below. Each check point
-      // spawns at most one.
-      if ((c < 0 || glm::length(candidates_[size_t(c)].position - checks_[j]) > reach) &&
-          !spawnedFrom_[j]) {
-        spawnedFrom_[j] = 1;
-        picks.push_back(uint32_t(candidates_.size() + spawned.size()));
-        spawned.push_back(checks_[j]);
-        pickPositions.push_back(checks_[j]);
-      } else if (c >= 0) {
-        picks.push_back(uint32_t(c));
-        pickPositions.push_back(candidates_[size_t(c)].position);
+    // A batch from the check points ranked by their relative error (the score's measure: a
+    // shaded point lit too bright ranks first) and, with symmetricPicks, one ranked by the
+    // symmetric error (a sunlit point lit too dark ranks as high): whichever scores lower is
+    // taken. Neither ranking wins everywhere (docs/probe_placement.md, "Symmetric picks").
+    std::vector<vec3> spawned;
+    std::vector<uint32_t> spawnedCheck;  // the check point each spawned probe stands on
+    auto makeBatch = [&](const std::vector<float>& error) {
+      std::vector<uint32_t> picks;
+      std::vector<vec3> pickPositions;
+      for (uint32_t j : pickOrder(error)) {
+        if (picks.size() >= batch) break;
+        bool covered = false;
+        for (const vec3& q : pickPositions)
+          covered = covered || glm::length(q - checks_[j]) < exclusion;
+        if (covered) continue;
+        const int64_t c = nearestCandidate(checks_[j], picks);
+        // No candidate near the bad point (open air, where the octree is coarse): a new probe
+        // at the point itself (it is valid: check points are), baked below. Each check point
+        // spawns at most one.
+        const bool far =
+            c < 0 || glm::length(candidates_[size_t(c)].position - checks_[j]) > reach;
+        const auto earlier = std::find(spawnedCheck.begin(), spawnedCheck.end(), j);
+        if (far && earlier != spawnedCheck.end()) {  // spawned by the other batch
+          picks.push_back(uint32_t(candidates_.size()) +
+                          uint32_t(earlier - spawnedCheck.begin()));
+          pickPositions.push_back(checks_[j]);
+        } else if (far && !spawnedFrom_[j]) {
+          spawnedFrom_[j] = 1;
+          picks.push_back(uint32_t(candidates_.size() + spawned.size()));
+          spawned.push_back(checks_[j]);
+          spawnedCheck.push_back(j);
+          pickPositions.push_back(checks_[j]);
+        } else if (c >= 0) {
+          picks.push_back(uint32_t(c));
+          pickPositions.push_back(candidates_[size_t(c)].position);
+        }
       }
+      return picks;
+    };
+    std::vector<std::vector<uint32_t>> batches = {makeBatch(current_->field.perPoint)};
+    if (settings_.symmetricPicks) {
+      std::vector<uint32_t> symmetric = makeBatch(current_->pickError);
+      if (symmetric != batches[0]) batches.push_back(std::move(symmetric));
     }
-    if (picks.empty()) {
+    if (batches[0].empty() && batches.size() == 1) {
       ranOutOfPicks_ = true;
       break;
     }
     if (!spawned.empty() && !addSpawned(spawned)) break;  // cancelled
-    if (settings_.leakWeight > 0.0f && picks.size() > 0) {
-      rejectLeakyPicks(&picks);
-      if (picks.empty()) continue;
+    std::vector<uint32_t> picks, trial;
+    std::optional<Scored> e;
+    for (std::vector<uint32_t>& b : batches) {
+      if (settings_.leakWeight > 0.0f && !b.empty()) rejectLeakyPicks(&b);
+      if (b.empty()) continue;
+      std::vector<uint32_t> t = selected_;
+      t.insert(t.end(), b.begin(), b.end());
+      std::optional<Scored> eb = evaluate(t);
+      if (!eb) {
+        for (uint32_t c : b) rejected_[c] = 1;  // degenerate topology: try others
+        continue;
+      }
+      if (!e || eb->score < e->score) {
+        e = std::move(eb);
+        picks = b;
+        trial = std::move(t);
+      }
     }
-    std::vector<uint32_t> trial = selected_;
-    trial.insert(trial.end(), picks.begin(), picks.end());
-    std::optional<Scored> e = evaluate(trial);
-    if (!e) {
-      for (uint32_t c : picks) rejected_[c] = 1;  // degenerate topology: try others
-      continue;
-    }
+    if (!e) continue;
     for (uint32_t c : picks) inSet_[c] = 1;
     selected_ = std::move(trial);
     current_ = std::move(e);
@@ -1211,8 +1262,7 @@ void ProbePlacer::grow() {
 
 // The pick points (all check points unless held out) with some error, worst first (ties
 // in index order).
-std::vector<uint32_t> ProbePlacer::pickOrder() const {
-  const std::vector<float>& error = current_->field.perPoint;
+std::vector<uint32_t> ProbePlacer::pickOrder(const std::vector<float>& error) const {
   std::vector<uint32_t> order;
   for (uint32_t j = 0; j < checks_.size(); ++j)
     if ((picksFromScoring_ || !scoring_[j]) && error[j] > 0.0f) order.push_back(j);

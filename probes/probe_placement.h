@@ -154,6 +154,13 @@ struct ProbePlacementSettings {
   // the courtyard and the breakfast room, worse in the atrium (docs/probe_placement.md,
   // "Held-out check points"). false: all check points do both.
   bool holdOut = false;
+  // Symmetric picks: each growth round builds a second batch from the check points ranked
+  // by symmetricIrradianceError (a sunlit point lit too dark ranks as high as a shaded point
+  // lit too bright; the relative error ranks the latter up to 3x higher) and keeps whichever
+  // batch scores lower. Off by default: better in the courtyard (open, sunlit air), worse
+  // for spheres where objects stand in the atrium (docs/probe_placement.md, "Symmetric
+  // picks").
+  bool symmetricPicks = false;
   // A bad check point farther than this x spacing from every free candidate gets a probe
   // of its own (open air, where the octree is coarse); 0 = always a new probe, large = never.
   float candidateReach = 0.25f;
@@ -246,6 +253,10 @@ Result<ProbePlacement> placeProbes(const Scene& scene, const Tracer& tracer,
 // point's own light, or to 5% of the scene's typical light where the point is darker).
 inline constexpr float kErrorFloorFraction = 0.05f;
 float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
+// The same difference divided by max(RMS of the true E, RMS of the estimated E, floor): an
+// estimate 3x too bright and one 3x too dark score alike (2/3), where the relative error gives
+// 2 and 2/3. Growth can rank check points by it (ProbePlacementSettings::symmetricPicks).
+float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
 // RMS over the six axis normals of the luminance of E.
 float irradianceRms(const ShL2Rgb& sh);
 // Largest luminance of E over the six axis normals (the leak tests' and chart's measure).
@@ -268,9 +279,11 @@ FieldError summarizeFieldError(std::vector<float> perPoint);
 // `set` must be complete (topology + SH). `truth[i]` is the SH baked at points[i]. The field
 // is looked up as the runtime does (locateProbe with `blend`: visibility-weighted when the set
 // has visibility maps and blend.visibility is true, plain barycentric otherwise).
+// `estimates`, when given, receives the looked-up SH at every point.
 FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
                              std::span<const ShL2Rgb> truth, float floor, int threads = 0,
-                             const ProbeBlendSettings& blend = {});
+                             const ProbeBlendSettings& blend = {},
+                             std::vector<ShL2Rgb>* estimates = nullptr);
 
 // SH baked at each point with bakeProbe (the probe bake's estimator), keyed by
 // hashValues(seed, i). Used as ground truth at check points and for placement's candidates.

@@ -161,15 +161,20 @@ TEST(ProbePlacement, NoFinalProbeInsideGeometryOrNearASurface) {
   EXPECT_GT(right, 0);
 }
 
+// With either pick ranking (symmetricPicks: two batches per round, the lower score kept).
 TEST(ProbePlacement, RefinementNeverRaisesItsCheckError) {
   const Traced t = traced(twoCells());
-  Result<ProbePlacement> placed = placeProbes(t.scene, *t.tracer, smallSettings());
-  ASSERT_TRUE(bool(placed)) << placed.error();
-  ASSERT_FALSE(placed->errorHistory.empty());
-  for (size_t i = 1; i < placed->errorHistory.size(); ++i)
-    EXPECT_LE(placed->errorHistory[i], placed->errorHistory[i - 1]);
-  EXPECT_LE(placed->estimatedError, placed->initialError);
-  EXPECT_FLOAT_EQ(placed->estimatedError, placed->errorHistory.back());
+  for (bool symmetric : {false, true}) {
+    ProbePlacementSettings s = smallSettings();
+    s.symmetricPicks = symmetric;
+    Result<ProbePlacement> placed = placeProbes(t.scene, *t.tracer, s);
+    ASSERT_TRUE(bool(placed)) << placed.error();
+    ASSERT_FALSE(placed->errorHistory.empty());
+    for (size_t i = 1; i < placed->errorHistory.size(); ++i)
+      EXPECT_LE(placed->errorHistory[i], placed->errorHistory[i - 1]) << symmetric;
+    EXPECT_LE(placed->estimatedError, placed->initialError) << symmetric;
+    EXPECT_FLOAT_EQ(placed->estimatedError, placed->errorHistory.back()) << symmetric;
+  }
 }
 
 TEST(ProbePlacement, BudgetAndTargetAreRespected) {
@@ -206,19 +211,22 @@ TEST(ProbePlacement, UniformGridHasExactlyTheRequestedCount) {
 
 TEST(ProbePlacement, DeterministicAcrossThreadCounts) {
   const Traced t = traced(twoCells());
-  ProbePlacementSettings a = smallSettings();
-  a.threads = 1;
-  a.bake.threads = 1;
-  ProbePlacementSettings b = smallSettings();
-  b.threads = 2;
-  b.bake.threads = 2;
-  Result<ProbePlacement> pa = placeProbes(t.scene, *t.tracer, a);
-  Result<ProbePlacement> pb = placeProbes(t.scene, *t.tracer, b);
-  ASSERT_TRUE(bool(pa) && bool(pb));
-  ASSERT_EQ(pa->probes.size(), pb->probes.size());
-  for (size_t i = 0; i < pa->probes.size(); ++i)
-    EXPECT_EQ(pa->probes[i].position, pb->probes[i].position);
-  EXPECT_EQ(pa->estimatedError, pb->estimatedError);
+  for (bool symmetric : {false, true}) {
+    ProbePlacementSettings a = smallSettings();
+    a.threads = 1;
+    a.bake.threads = 1;
+    a.symmetricPicks = symmetric;
+    ProbePlacementSettings b = a;
+    b.threads = 2;
+    b.bake.threads = 2;
+    Result<ProbePlacement> pa = placeProbes(t.scene, *t.tracer, a);
+    Result<ProbePlacement> pb = placeProbes(t.scene, *t.tracer, b);
+    ASSERT_TRUE(bool(pa) && bool(pb));
+    ASSERT_EQ(pa->probes.size(), pb->probes.size());
+    for (size_t i = 0; i < pa->probes.size(); ++i)
+      EXPECT_EQ(pa->probes[i].position, pb->probes[i].position) << symmetric;
+    EXPECT_EQ(pa->estimatedError, pb->estimatedError) << symmetric;
+  }
   const std::vector<Bounds3> volumes = placementVolumes(t.scene, {});
   EXPECT_EQ(randomValidPoints(t.scene, *t.tracer, volumes, 50, 7, {}, 1),
             randomValidPoints(t.scene, *t.tracer, volumes, 50, 7, {}, 3));
@@ -244,6 +252,25 @@ TEST(ProbePlacement, ErrorMeasureIsZeroForItselfAndScaleInvariant) {
   EXPECT_EQ(relativeIrradianceError(a, a, 0.0f), 0.0f);
   EXPECT_NEAR(relativeIrradianceError(a, a * 1.1f, 0.0f), 0.1f, 1e-5f);
   EXPECT_NEAR(relativeIrradianceError(a * 3.0f, a * 3.3f, 0.0f), 0.1f, 1e-5f);
+}
+
+// Growth's pick measure: relative to the brighter of truth and estimate, so a shaded point
+// lit 3x too bright and a sunlit point lit 3x too dark rank alike (the relative error gives 2
+// and 2/3: greedy picks went to the first kind, and sunlit open air stayed lit by shaded
+// probes, docs/probe_placement.md "Symmetric picks").
+TEST(ProbePlacement, PickErrorIsSymmetricInTruthAndEstimate) {
+  ShL2Rgb a;
+  a.c[0] = vec3(1.0f);
+  a.c[2] = vec3(0.5f);
+  EXPECT_EQ(symmetricIrradianceError(a, a, 0.0f), 0.0f);
+  EXPECT_NEAR(symmetricIrradianceError(a, a * 3.0f, 0.0f), 2.0f / 3.0f, 1e-5f);
+  EXPECT_NEAR(symmetricIrradianceError(a * 3.0f, a, 0.0f), 2.0f / 3.0f, 1e-5f);
+  EXPECT_NEAR(relativeIrradianceError(a, a * 3.0f, 0.0f), 2.0f, 1e-5f);
+  EXPECT_NEAR(relativeIrradianceError(a * 3.0f, a, 0.0f), 2.0f / 3.0f, 1e-5f);
+  // Below the floor both measures divide by it.
+  const float floor = 100.0f * irradianceRms(a);
+  EXPECT_NEAR(symmetricIrradianceError(a, a * 3.0f, floor),
+              relativeIrradianceError(a, a * 3.0f, floor), 1e-6f);
 }
 
 TEST(ProbePlacement, CellsCrossingAWallAreCounted) {

@@ -69,6 +69,7 @@ struct CommonOptions {
   float leakWeight = 1.0f;
   float floorHeight = 0.4f;
   bool holdOut = false;
+  bool symmetricPicks = false;
   bool noSceneProbes = false;
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = score the plain blend
   uint64_t seed = 0;
@@ -97,6 +98,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
   s->leakWeight = o.leakWeight;
   s->floorHeight = o.floorHeight;
   s->holdOut = o.holdOut;
+  s->symmetricPicks = o.symmetricPicks;
   s->bake.visibilityResolution = o.visibilityResolution;
   s->seed = o.seed;
   s->threads = o.threads;
@@ -141,6 +143,10 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
   c->add_flag("--hold-out", o->holdOut,
               "Growth picks from half of the check points and the other half scores the sets "
               "(by default the same check points do both)");
+  c->add_flag("--symmetric-picks", o->symmetricPicks,
+              "Each growth round also builds a batch from the check points ranked by the "
+              "error relative to the brighter of truth and estimate, and keeps the batch "
+              "that scores lower (better in open sunlit space, worse where objects stand)");
   c->add_flag("--no-scene-probes", o->noSceneProbes,
               "Ignore the scene's probe groups (extras.kiln.probes); by default they are fixed "
               "probes that placement builds around");
