@@ -63,9 +63,11 @@ inline constexpr uint64_t kMaxLightmapTexels = uint64_t(1) << 27;
 Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& what);
 
 // Default of AtlasSettings::minObjectTexels, UnwrapSettings::minObjectTexels and kiln bake's
-// --min-object-texels: negative = automatic (tooSmallForLightmap); 0 = every lightmapped
-// object gets a lightmap; N > 0 = objects under N texels are lit by probes.
-inline constexpr float kMinObjectTexels = -1.0f;
+// --min-object-texels: negative = automatic (tooSmallForLightmap; `--min-object-texels auto`);
+// 0 = every lightmapped object gets a lightmap; N > 0 = objects under N texels are lit by
+// probes. 0 by default: the output glTF gives a probe-lit object no lighting of its own, so a
+// viewer without kiln's probes (three.js, browser_real_scene) draws it black.
+inline constexpr float kMinObjectTexels = 0.0f;
 
 // The automatic rule takes small props, as a Unity user sets Receive GI: Light Probes on
 // them: an object whose UVs kiln generates (no TEXCOORD_1: nobody made it a lightmap) whose

@@ -185,7 +185,7 @@ TEST(LightmapAtlas, ChartsPackedIntoThePageBeatTheirObjectsRectangles) {
   // (two make a 3 x 4 rectangle less two squares, 83% full, less the gutters).
   Scene scene;
   test::addMaterial(scene, test::lambert(vec3(0.5f)));
-  for (int i = 0; i < 8; ++i) addL(scene, "L" + std::to_string(i), float(i));
+  for (int i = 0; i < 8; ++i) addL(scene, std::string("L") + std::to_string(i), float(i));
   AtlasSettings settings;
   settings.resolution = 20.0f;
   std::vector<std::optional<UnwrapResult>> unwraps(scene.objects.size());
@@ -267,11 +267,12 @@ TEST(LightmapAtlas, ChartsPackedIntoThePageBeatTheirObjectsRectangles) {
   EXPECT_NE(mismatch.error().find("no longer pack"), std::string::npos) << mismatch.error();
 }
 
-TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitByDefault) {
-  // At 10 texels per unit the automatic rule takes objects without TEXCOORD_1 under 50 texels
+TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitUnderTheAutomaticRule) {
+  // At 10 texels per unit the automatic rule (minObjectTexels < 0, `--min-object-texels auto`) takes objects without TEXCOORD_1 under 50 texels
   // (0.5 m^2) that hold under 1% of the lightmapped area. A 10 x 10 floor (100 m^2) with a
   // 0.5 x 0.5 prop (25 texels, 0.25%): the prop goes to probes without UVs of its own, not
   // with them, nor at 20 texels per unit (100 texels > 5 x 20) or with minObjectTexels 0.
+  constexpr float kAuto = -1.0f;
   Scene scene;
   test::addMaterial(scene, test::lambert(vec3(0.5f)));
   addFloor(scene, "floor", 10.0f, 10.0f);
@@ -280,11 +281,18 @@ TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitByDefault) {
   scene.objects[prop].uv1.clear();
   const double area = lightmappedArea(scene);
   EXPECT_NEAR(area, 100.5, 1e-4);
-  EXPECT_TRUE(tooSmallForLightmap(scene.objects[prop], 10.0f, kMinObjectTexels, area));
-  EXPECT_FALSE(tooSmallForLightmap(scene.objects[authored], 10.0f, kMinObjectTexels, area));
-  EXPECT_FALSE(tooSmallForLightmap(scene.objects[prop], 20.0f, kMinObjectTexels, area));
+  EXPECT_TRUE(tooSmallForLightmap(scene.objects[prop], 10.0f, kAuto, area));
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[authored], 10.0f, kAuto, area));
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[prop], 20.0f, kAuto, area));
   EXPECT_FALSE(tooSmallForLightmap(scene.objects[prop], 10.0f, 0.0f, area));
-  const auto layout = packAtlas(scene, AtlasSettings{});
+  AtlasSettings automatic;
+  automatic.minObjectTexels = kAuto;
+  const auto layout = packAtlas(scene, automatic);
+  // The default (0) gives every object a lightmap: the prop, without UVs, is an error here
+  // (the baker generates them first).
+  const auto all = packAtlas(scene, AtlasSettings{});
+  ASSERT_FALSE(all.ok());
+  EXPECT_NE(all.error().find("'prop'"), std::string::npos) << all.error();
   ASSERT_TRUE(layout.ok()) << layout.error();
   EXPECT_TRUE(layout->objects[prop].probeLit);
   EXPECT_EQ(layout->objects[authored].lightmapIndex, 0);
@@ -295,7 +303,7 @@ TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitByDefault) {
   test::addMaterial(small, test::lambert(vec3(0.5f)));
   for (int i = 0; i < 4; ++i) addFloor(small, "wall" + std::to_string(i), 0.5f, 0.5f, float(i));
   for (const Object& o : small.objects)
-    EXPECT_FALSE(tooSmallForLightmap(o, 10.0f, kMinObjectTexels, lightmappedArea(small)));
+    EXPECT_FALSE(tooSmallForLightmap(o, 10.0f, kAuto, lightmappedArea(small)));
 }
 
 TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -48,7 +49,7 @@ struct BakeOptions {
   std::optional<float> resolution;
   std::optional<int> maxSize;
   std::optional<int> padding;
-  std::optional<float> minObjectTexels;
+  std::optional<std::string> minObjectTexels;  // "auto" or a texel count
   std::optional<int> bounces;
   std::optional<uint64_t> seed;
   int threads = 0;
@@ -216,7 +217,9 @@ int runBake(const BakeOptions& options) {
   if (o.resolution) settings.resolution = *o.resolution;
   if (o.maxSize) settings.maxSize = *o.maxSize;
   if (o.padding) settings.padding = *o.padding;
-  if (o.minObjectTexels) settings.minObjectTexels = *o.minObjectTexels;
+  if (o.minObjectTexels)
+    settings.minObjectTexels =
+        *o.minObjectTexels == "auto" ? -1.0f : std::strtof(o.minObjectTexels->c_str(), nullptr);
   if (o.bounces) settings.bounces = *o.bounces;
   if (o.seed) settings.seed = *o.seed;
   settings.threads = o.threads;
@@ -362,10 +365,18 @@ void registerBakeCommand(CLI::App& app) {
       ->check(CLI::Range(1, 16384));
   b->add_option("--min-object-texels", o->minObjectTexels,
                 "Objects whose surface would get fewer lightmap texels are lit by probes "
-                "instead, listed in a warning and the manifest (default: objects without "
-                "TEXCOORD_1 under 5 x --resolution texels and 1% of the lightmapped area; "
-                "0 = never)")
-      ->check(CLI::Range(0.0f, 1e9f));
+                "instead, listed in a warning and the manifest (default 0 = never; \"auto\": "
+                "objects without TEXCOORD_1 under 5 x --resolution texels and 1% of the "
+                "lightmapped area)")
+      ->check([](const std::string& v) -> std::string {
+        if (v == "auto") return "";
+        char* end = nullptr;
+        const float n = std::strtof(v.c_str(), &end);
+        if (end == v.c_str() || *end != '\0' || !(n >= 0.0f && n <= 1e9f))
+          return "expected \"auto\" or a number in [0, 1e9], got \"" + v +
+                 "\"";
+        return "";
+      });
   b->add_option("--padding", o->padding, "Empty texels around every object (default 2)")
       ->check(CLI::Range(0, 256));
   b->add_option("--bounces", o->bounces, "Bounce cap (default 64; Russian roulette)")
