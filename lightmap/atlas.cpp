@@ -6,6 +6,7 @@
 #include <array>
 #include <climits>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -56,6 +57,27 @@ double texelsPerUv(double k, double eu, double ev, int limit) {
 // whole 4 x 4 blocks), or maxSize itself.
 constexpr int kPageAlign = 4;
 
+// A page side of at least x texels: rounded up to kPageAlign, at most maxSize.
+int pageSide(int x, int maxSize) {
+  return std::min(maxSize, (x + kPageAlign - 1) / kPageAlign * kPageAlign);
+}
+
+// The page that holds packed content spanning w x h texels with `padding` empty texels
+// around it (pageSide on each side).
+glm::ivec2 paddedPage(int w, int h, int padding, int maxSize) {
+  return glm::ivec2(pageSide(w + 2 * padding, maxSize), pageSide(h + 2 * padding, maxSize));
+}
+
+// The chart packer's cost of content spanning w x h texels (ChartPackOptions::cost): the area
+// of its padded page; INT64_MAX when it is too tall for a page of maxSize.
+std::function<int64_t(int, int)> paddedPageArea(int padding, int maxSize) {
+  return [padding, maxSize](int w, int h) -> int64_t {
+    if (h + 2 * padding > maxSize) return INT64_MAX;
+    const glm::ivec2 page = paddedPage(w, h, padding, maxSize);
+    return int64_t(page.x) * page.y;
+  };
+}
+
 // The smallest page (by area; ties: the squarer, then the earlier order) that holds `items`,
 // padded as packPage pads: for each of four insertion orders (the given one, then by width,
 // by area and by longer side, all descending with ties by index) and each candidate width
@@ -71,9 +93,6 @@ glm::ivec2 smallestPage(int maxSize, int padding, std::vector<uint32_t>& items,
     area += double(padded[i].x) * double(padded[i].y);
     widest = std::max(widest, padded[i].x + padding);
   }
-  auto align = [&](int x) {
-    return std::min(maxSize, (x + kPageAlign - 1) / kPageAlign * kPageAlign);
-  };
   const std::vector<int> widths =
       candidateWidths(std::max(widest, int(std::sqrt(area) / 2.0)), maxSize, kPageAlign, 128);
   std::vector<int> bins;
@@ -91,7 +110,7 @@ glm::ivec2 smallestPage(int maxSize, int padding, std::vector<uint32_t>& items,
         return key(order, a) != key(order, b) ? key(order, a) > key(order, b) : a < b;
       });
     const auto packed = packSmallest(padded, trial, bins, maxSize - padding, [&](int w, int used) {
-      return glm::ivec2(w + padding, align(used + padding));
+      return glm::ivec2(w + padding, pageSide(used + padding, maxSize));
     });
     if (!packed) continue;
     const int64_t a = int64_t(packed->page.x) * packed->page.y, b = int64_t(best.x) * best.y;
@@ -154,26 +173,17 @@ ChartFootprint objectFootprint(const Object& o, std::pair<vec2, vec2> bounds, gl
 std::optional<std::pair<glm::ivec2, std::vector<glm::ivec2>>> shapePage(
     int maxSize, int padding, const std::vector<uint32_t>& members,
     const std::vector<ChartFootprint>& footprints) {
-  auto align = [&](int x) { return (x + kPageAlign - 1) / kPageAlign * kPageAlign; };
   std::vector<ChartFootprint> shapes;
   for (uint32_t i : members) shapes.push_back(footprints[i]);
   ChartPackOptions options;
   options.rigid.assign(shapes.size(), true);
   options.maxWidth = maxSize - 2 * padding;
-  auto pageOf = [&](int w, int h) {
-    return glm::ivec2(std::min(maxSize, align(w + 2 * padding)),
-                      std::min(maxSize, align(h + 2 * padding)));
-  };
-  options.cost = [&](int w, int h) -> int64_t {
-    if (h + 2 * padding > maxSize) return INT64_MAX;
-    const glm::ivec2 page = pageOf(w, h);
-    return int64_t(page.x) * page.y;
-  };
+  options.cost = paddedPageArea(padding, maxSize);
   const ChartPacking packed = packCharts(shapes, {}, padding, options);
   if (packed.size.x <= 0 || packed.size.y + 2 * padding > maxSize) return std::nullopt;
   std::vector<glm::ivec2> corners(members.size());
   for (size_t m = 0; m < members.size(); ++m) corners[m] = packed.corners[m] + glm::ivec2(padding);
-  return std::make_pair(pageOf(packed.size.x, packed.size.y), corners);
+  return std::make_pair(paddedPage(packed.size.x, packed.size.y, padding, maxSize), corners);
 }
 
 }  // namespace
@@ -396,7 +406,6 @@ Status packChartsIntoPages(Scene& scene, AtlasLayout& layout, const AtlasSetting
                            std::vector<std::optional<UnwrapResult>>& unwraps) {
   const int p = settings.padding, gutter = std::max(1, p);
   const int limit = settings.maxSize - 2 * p;
-  auto align = [&](int x) { return (x + kPageAlign - 1) / kPageAlign * kPageAlign; };
   auto generated = [&](uint32_t i) {
     return i < unwraps.size() && unwraps[i].has_value() &&
            unwraps[i]->uv1.size() == scene.objects[i].uv1.size();
@@ -475,19 +484,12 @@ Status packChartsIntoPages(Scene& scene, AtlasLayout& layout, const AtlasSetting
     options.rigid = rigid;
     options.maxWidth = limit;
     options.fromWidest = true;
-    auto pageOf = [&](int w, int h) {
-      return glm::ivec2(std::min(settings.maxSize, align(w + 2 * p)),
-                        std::min(settings.maxSize, align(h + 2 * p)));
-    };
-    options.cost = [&](int w, int h) -> int64_t {
-      if (h > limit) return INT64_MAX;
-      const glm::ivec2 size = pageOf(w, h);
-      return int64_t(size.x) * size.y;
-    };
+    options.cost = paddedPageArea(p, settings.maxSize);
     const ChartPacking packed = packCharts(upright, quarter, gutter, options);
     const AtlasPage before = layout.pages[size_t(page)];
     const bool fits = packed.size.x > 0 && packed.size.y <= limit;
-    const glm::ivec2 size = fits ? pageOf(packed.size.x, packed.size.y) : glm::ivec2(0);
+    const glm::ivec2 size =
+        fits ? paddedPage(packed.size.x, packed.size.y, p, settings.maxSize) : glm::ivec2(0);
     if (settings.locked) {
       if (size != glm::ivec2(before.width, before.height))
         return Error{"locked atlas: lightmap " + std::to_string(page) +
