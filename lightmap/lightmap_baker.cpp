@@ -416,6 +416,16 @@ struct LightSettings {
   bool mainPointOnly = false;
 };
 
+// The points stage 5 traces for a texel: its own points (texelPoints) and its footprint grid
+// (gridPoints, empty without one); the pilot pass (mainPointOnly) traces the main sample alone.
+struct TexelPointSets {
+  std::pair<TexelPoint*, uint32_t> own, grid;
+};
+TexelPointSets lightPointSets(RasterPage& page, TexelSample& texel, const LightSettings& s) {
+  if (s.mainPointOnly) return {{&texel.sample, 1u}, {nullptr, 0u}};
+  return {texelPoints(page, texel, s.supersampling), gridPoints(page, texel)};
+}
+
 // Running sums over sample points (each term x the point's sample count).
 struct PointSums {
   glm::dvec3 light{0.0};        // irradiance E
@@ -627,8 +637,8 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
       count += nb;
     }
     out.variance = float(ss / double(batches.size() - 1) / count);
-    // Groups of kGroupBatches consecutive batches: each round's batches are slices in
-    // order, so a group is again one contiguous, aligned slice of every point's share.
+    // Groups of kGroupBatches consecutive batches: the batches are slices in order, so a
+    // group is again one contiguous, aligned slice of every point's share.
     std::vector<std::pair<double, double>> groups;  // (luminance sum, paths)
     for (size_t b = 0; b < batches.size(); ++b) {
       if (b % kGroupBatches == 0) groups.push_back({0.0, 0.0});
@@ -720,12 +730,9 @@ WorkSplit splitTexels(std::vector<RasterPage>& pages, const std::vector<TexelRef
   const double perSample = 1.0 + (s.ambientOcclusion ? 1.0 : 0.0) + (s.shadowmask ? 1.0 : 0.0);
   return splitWork(texels.size(), kTexelTile, [&](size_t i) {
     RasterPage& page = pages[texels[i].page];
-    TexelSample& texel = page.texels[texels[i].index];
-    // A footprint grid's visible points (its fallback to the texel's own points is rare);
-    // the pilot pass traces the main sample only.
-    const uint32_t points = s.mainPointOnly         ? 1u
-                            : texel.footprintGrid() ? texel.gridPointCount
-                                                    : texelPoints(page, texel, s.supersampling).second;
+    // A footprint grid's points (its fallback to the texel's own points is rare).
+    const TexelPointSets sets = lightPointSets(page, page.texels[texels[i].index], s);
+    const uint32_t points = sets.grid.second > 0 ? sets.grid.second : sets.own.second;
     // Adaptive sampling's own count per texel, as the light stage uses it.
     const uint32_t samples = s.texelSamples ? std::max((*s.texelSamples)[i], points) : s.samples;
     return double(samples) * perSample + double(points) * double(kEnclosureRays);
@@ -755,12 +762,9 @@ bool lightStage(std::vector<RasterPage>& pages, const std::vector<TexelRef>& tex
         for (size_t i = begin; i < end; ++i) {
           RasterPage& page = pages[texels[i].page];
           TexelSample& texel = page.texels[texels[i].index];
-          const auto [points, count] = s.mainPointOnly
-                                           ? std::pair<TexelPoint*, uint32_t>{&texel.sample, 1u}
-                                           : texelPoints(page, texel, s.supersampling);
-          const auto [grid, gridCount] = s.mainPointOnly
-                                             ? std::pair<TexelPoint*, uint32_t>{nullptr, 0u}
-                                             : gridPoints(page, texel);
+          const TexelPointSets sets = lightPointSets(page, texel, s);
+          const auto [points, count] = sets.own;
+          const auto [grid, gridCount] = sets.grid;
           const uint64_t key = hashValues(s.seed, texels[i].page, texels[i].index);
           const float reach =
               s.enclosedTexels / s.layout->objects[size_t(texel.object)].texelsPerUnit;
