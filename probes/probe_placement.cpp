@@ -350,27 +350,33 @@ ShL2Rgb lightThroughWall(const Tracer& tracer, const ProbeSet& set, vec3 p,
   return sum;
 }
 
-float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
-  float diff = 0.0f, ref = 0.0f;
-  for (const vec3& n : kAxisNormals) {
-    const float t = luminance(truth.irradiance(n));
-    const float d = luminance(estimate.irradiance(n)) - t;
-    diff += d * d;
-    ref += t * t;
-  }
-  return std::sqrt(diff / 6.0f) / std::max(std::sqrt(ref / 6.0f), floor);
-}
-
-float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+// Root mean squares over the six axis normals of the luminance of E: of the estimate's
+// error, of the truth and of the estimate (relativeIrradianceError and
+// symmetricIrradianceError divide the first by the others).
+struct AxisRms {
+  float error = 0.0f, truth = 0.0f, estimate = 0.0f;
+};
+static AxisRms axisRms(const ShL2Rgb& truth, const ShL2Rgb& estimate) {
   float diff = 0.0f, ref = 0.0f, est = 0.0f;
   for (const vec3& n : kAxisNormals) {
     const float t = luminance(truth.irradiance(n));
     const float e = luminance(estimate.irradiance(n));
-    diff += (e - t) * (e - t);
+    const float d = e - t;
+    diff += d * d;
     ref += t * t;
     est += e * e;
   }
-  return std::sqrt(diff / 6.0f) / std::max({std::sqrt(ref / 6.0f), std::sqrt(est / 6.0f), floor});
+  return {std::sqrt(diff / 6.0f), std::sqrt(ref / 6.0f), std::sqrt(est / 6.0f)};
+}
+
+float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+  const AxisRms r = axisRms(truth, estimate);
+  return r.error / std::max(r.truth, floor);
+}
+
+float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+  const AxisRms r = axisRms(truth, estimate);
+  return r.error / std::max({r.truth, r.estimate, floor});
 }
 
 FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
