@@ -7,13 +7,13 @@
 // reference value is not 0 (padding included, as dilated copies). Exit codes: 0 ok, 1 bad
 // input (unreadable manifest or page, pages that differ in size), 2 bad usage.
 #include <CLI/CLI.hpp>
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <optional>
 
 #include "lightmap/manifest.h"
+#include "tools/lightmap_compare/reference_compare.h"
 #include "src/image.h"
 #include "src/math.h"
 
@@ -55,8 +55,7 @@ int main(int argc, char** argv) {
   if (!b) return fail(b.error());
   if (a->manifest.lightmaps.size() != b->manifest.lightmaps.size())
     return fail("the bakes have different page counts");
-  double sumSq = 0.0, sumRefSq = 0.0, sumK = 0.0, sumR = 0.0;
-  size_t texels = 0;
+  kiln::ReferenceErrorSums sums;
   bool weighted = false;
   for (size_t p = 0; p < a->manifest.lightmaps.size(); ++p) {
     const auto& pa = a->manifest.lightmaps[p];
@@ -79,16 +78,17 @@ int main(int argc, char** argv) {
         const kiln::vec3 r = rb->rgb(x, y), k = ka->rgb(x, y);
         if (coverage ? !(coverage->at(x, y)[0] > 0.0f) : r == kiln::vec3(0.0f)) continue;
         const kiln::vec3 d = k - r;
-        sumSq += double(glm::dot(d, d));
-        sumRefSq += double(glm::dot(r, r));
-        sumK += double(kiln::luminance(k));
-        sumR += double(kiln::luminance(r));
-        ++texels;
+        sums.sumSquaredError += double(glm::dot(d, d));
+        sums.sumSquaredReference += double(glm::dot(r, r));
+        sums.sumKiln += double(kiln::luminance(k));
+        sums.sumReference += double(kiln::luminance(r));
+        ++sums.texels;
       }
   }
-  if (texels == 0 || !(sumRefSq > 0.0)) return fail("no texel to compare (a black reference?)");
-  std::printf("texels %zu (%s), relative RMSE %.4f%%, mean ratio %.5f\n", texels,
+  if (sums.texels == 0 || !(sums.sumSquaredReference > 0.0))
+    return fail("no texel to compare (a black reference?)");
+  std::printf("texels %zu (%s), relative RMSE %.4f%%, mean ratio %.5f\n", sums.texels,
               weighted ? "reference coverage > 0" : "reference not 0",
-              100.0 * std::sqrt(sumSq / sumRefSq), sumK / sumR);
+              100.0 * sums.relativeRmse(), sums.meanRatio());
   return 0;
 }

@@ -543,7 +543,7 @@ class Renderer {
       Bounds3 b;
       for (vec3 p : object.positions) b.extend(p);
       if (!in_.probes && lm.objects[o].probeLit && !b.empty()) {
-        // Too small for a lightmap (kiln bake's default takes small props): probes baked
+        // Too small for a lightmap (kiln bake --min-object-texels): probes baked
         // around it, so that a preview without a probe file does not draw it black.
         objectProbes_[o] = probeLightAround(lm, b, o);
         continue;
