@@ -660,7 +660,8 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
 // Whether own point i of a texel's `count` own points is inside geometry, decided as
 // lightPoints decides it without a grid (the point's share of the texel's paths, its first
 // rays' back faces over backfaceTolerance, else the enclosure test on the same stream),
-// without estimating its light: one ray per path, plus the enclosure rays.
+// without estimating its light: at most one ray per path (it stops once decided), plus
+// the enclosure rays.
 bool ownPointInside(const Integrator& integrator, const LightSettings& s, uint64_t key,
                     const TexelPoint* points, uint32_t count, uint32_t i, float enclosedReach,
                     uint64_t& extraRays) {
@@ -668,8 +669,8 @@ bool ownPointInside(const Integrator& integrator, const LightSettings& s, uint64
   const uint32_t first = uint32_t(uint64_t(i) * paths / count);
   const uint32_t n = uint32_t(uint64_t(i + 1) * paths / count) - first;
   const TexelPoint& p = points[i];
-  const uint32_t backFaces = integrator.firstHitBackFaces(p.position, p.normal, key, first, n);
-  return float(backFaces) > s.backfaceTolerance * float(n) ||
+  return integrator.firstRaysSeeBackFaces(p.position, p.normal, key, first, n,
+                                          s.backfaceTolerance) ||
          enclosed(integrator, p, enclosedReach, hashValues(key, i), extraRays);
 }
 

@@ -490,14 +490,18 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
   }
 }
 
-uint32_t Integrator::firstHitBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
-                                       uint32_t sampleCount) const {
-  if (sampleCount == 0) return 0;
+bool Integrator::firstRaysSeeBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
+                                       uint32_t sampleCount, float share) const {
+  const float limit = share * float(sampleCount);
+  if (sampleCount == 0) return 0.0f > limit;
   n = glm::normalize(n);
   const Frame frame = Frame::fromNormal(n);
   const vec3 origin = offsetRayOrigin(p, n);
   uint32_t count = 0;
   for (uint32_t s = firstSample; s < firstSample + sampleCount; ++s) {
+    // Decided: already above the limit, or not above it even if every ray left were counted.
+    if (float(count) > limit) return true;
+    if (!(float(count + (firstSample + sampleCount - s)) > limit)) return false;
     SampleStream stream(key, s);
     const vec3 local = squareToCosineHemisphere(draw2D(stream, 0, kSlotBsdf));
     if (!(cosineHemispherePdf(local.z) > 0.0f)) continue;
@@ -538,7 +542,7 @@ uint32_t Integrator::firstHitBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t fi
         materials_->entries[scene_.objects[h.object].triangleMaterial[h.triangle]];
     if (h.backFace && !m.doubleSided && m.alphaMode != AlphaMode::Blend) ++count;
   }
-  return count;
+  return float(count) > limit;
 }
 
 LightingEstimate Integrator::irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,

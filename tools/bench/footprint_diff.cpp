@@ -14,8 +14,12 @@
 //     `--margin`, relative) took light from somewhere no visible neighbour sees: a leak.
 // and lists the largest changes with object, world position, validity, coverage and bound.
 //
+// With --reference F, a third bake at F texels per unit (no grid) gives each such texel the
+// mean over the finer valid texels within its footprint that its main sample reaches: which
+// of the two values is nearer it, and how many exceed twice it.
+//
 //   kiln_footprint_diff SCENE [--preset P] [--resolution R] [--samples N] [--seed S]
-//                       [--top K] [--margin M]
+//                       [--top K] [--margin M] [--reference F]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -103,6 +107,7 @@ int main(int argc, char** argv) {
   std::string preset = "preview";
   float resolution = 8.0f, margin = 0.25f;
   int samples = 0, top = 25;
+  float reference = 0.0f;  // --reference R: texels per unit of the finer bake (0 = none)
   for (int a = 2; a + 1 < argc; a += 2) {
     if (!std::strcmp(argv[a], "--preset")) preset = argv[a + 1];
     else if (!std::strcmp(argv[a], "--resolution")) resolution = std::strtof(argv[a + 1], nullptr);
@@ -110,6 +115,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--seed")) s.seed = std::strtoull(argv[a + 1], nullptr, 10);
     else if (!std::strcmp(argv[a], "--top")) top = std::atoi(argv[a + 1]);
     else if (!std::strcmp(argv[a], "--margin")) margin = std::strtof(argv[a + 1], nullptr);
+    else if (!std::strcmp(argv[a], "--reference")) reference = std::strtof(argv[a + 1], nullptr);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -142,7 +148,36 @@ int main(int argc, char** argv) {
     }
     r.push_back(std::move(baked).value());
   }
+  if (reference > 0.0f) {
+    s.footprintGrid = false;
+    s.resolution = reference;
+    auto baked = bakeLightmaps(scene, s);
+    if (!baked) {
+      std::fprintf(stderr, "%s\n", baked.error().c_str());
+      return 1;
+    }
+    r.push_back(std::move(baked).value());
+  }
   const LightmapBakeResult &off = r[0], &on = r[1];
+  // The finer bake's valid texels per object: (main sample, value).
+  std::vector<std::vector<std::pair<vec3, float>>> fine(on.scene.objects.size());
+  if (reference > 0.0f)
+    for (size_t p = 0; p < r[2].pages.size(); ++p) {
+      const LightmapPageResult& pg = r[2].pages[p];
+      for (size_t o = 0; o < r[2].layout.objects.size(); ++o) {
+        const AtlasObject& ao = r[2].layout.objects[o];
+        if (ao.lightmapIndex != int(p)) continue;
+        const int w = pg.light.width;
+        for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+          for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
+            const size_t j = size_t(y) * size_t(w) + size_t(x);
+            if (!pg.valid[j] || pg.samples[j] == 0) continue;
+            fine[o].push_back({vec3(pg.position.pixels[3 * j], pg.position.pixels[3 * j + 1],
+                                    pg.position.pixels[3 * j + 2]),
+                               lum(pg.light, j)});
+          }
+      }
+    }
   auto tracer = Tracer::create(on.scene);
   if (!tracer) {
     std::fprintf(stderr, "%s\n", tracer.error().c_str());
@@ -164,7 +199,8 @@ int main(int argc, char** argv) {
   double sumOff = 0.0, sumOn = 0.0;
   struct Change {
     size_t page, index;
-    float a, b, bound, coverage;
+    float a, b, bound, coverage, ref;
+    int refCount;
     bool validOff, validOn, leak;
   };
   std::vector<Change> bright;
@@ -202,7 +238,21 @@ int main(int argc, char** argv) {
           bound = std::max(bound, lum(pa.light, j));
         }
       const float coverage = pb.coverage.empty() ? 1.0f : pb.coverage.pixels[i];
-      bright.push_back({p, i, a, b, bound, coverage, pa.valid[i] != 0, pb.valid[i] != 0,
+      // The finer bake's mean over its valid texels of this object within the texel's
+      // footprint (main samples within 0.75 of a texel of its main sample) that its main
+      // sample reaches along the surface: the visible part's mean light at a finer scale.
+      double refSum = 0.0;
+      int refCount = 0;
+      const float radius = 0.75f / on.layout.objects[size_t(owner[p][i])].texelsPerUnit;
+      for (const auto& [q, v] : fine[size_t(owner[p][i])]) {
+        if (glm::length(q - anchor) > radius) continue;
+        if (hidden(on.scene, **tracer, anchor, na, q, nearestNormal(o, q))) continue;
+        refSum += v;
+        ++refCount;
+      }
+      const float ref = refCount > 0 ? float(refSum / refCount) : -1.0f;
+      bright.push_back({p, i, a, b, bound, coverage, ref, refCount, pa.valid[i] != 0,
+                        pb.valid[i] != 0,
                         b > (1.0f + margin) * bound + 0.001f});
     }
   }
@@ -227,6 +277,30 @@ int main(int argc, char** argv) {
         std::printf("  %s -> %s | %s | %zu | %zu\n", vo ? "valid" : "invalid",
                     vn ? "valid" : "invalid", hc ? "yes" : "no ", within, beyond);
       }
+  if (reference > 0.0f) {
+    // Against the finer bake: which of the two values is nearer its visible-part mean, and
+    // how many with the grid exceed twice that mean (light no visible point there has).
+    size_t nearer = 0, farther = 0, none = 0, overTwice = 0, overTwiceOff = 0;
+    double refOn = 0.0, refOff = 0.0, sumRef = 0.0;
+    for (const Change& c : bright) {
+      if (c.refCount == 0) {
+        ++none;
+        continue;
+      }
+      (std::abs(c.b - c.ref) < std::abs(c.a - c.ref) ? nearer : farther)++;
+      overTwice += c.b > 2.0f * c.ref + 0.01f ? 1 : 0;
+      overTwiceOff += c.a > 2.0f * c.ref + 0.01f ? 1 : 0;
+      refOn += c.b;
+      refOff += c.a;
+      sumRef += c.ref;
+    }
+    std::printf("against a bake at %g texels per unit (no grid): the grid's value is nearer "
+                "its visible-part mean for %zu, farther for %zu (%zu without finer texels); "
+                "above twice it (+0.01): %zu with the grid, %zu without; sums on / ref %.3f, "
+                "off / ref %.3f\n",
+                reference, nearer, farther, none, overTwice, overTwiceOff, refOn / sumRef,
+                refOff / sumRef);
+  }
   std::sort(bright.begin(), bright.end(), [](const Change& l, const Change& m) {
     if (l.leak != m.leak) return l.leak;
     return l.b - l.a > m.b - m.a;
@@ -237,12 +311,13 @@ int main(int argc, char** argv) {
     const LightmapPageResult& pb = on.pages[c.page];
     const int w = pb.light.width;
     std::printf("  %-28s page %zu (%4d,%4d) pos %7.3f %7.3f %7.3f  off %.4f%s  on %.4f%s  "
-                "coverage %.3f  bound %.4f%s\n",
+                "coverage %.3f  bound %.4f  ref %.4f (%d)%s\n",
                 on.scene.objects[size_t(owner[c.page][c.index])].name.c_str(), c.page,
                 int(c.index % size_t(w)), int(c.index / size_t(w)),
                 pb.position.pixels[3 * c.index], pb.position.pixels[3 * c.index + 1],
                 pb.position.pixels[3 * c.index + 2], c.a, c.validOff ? "" : "(i)", c.b,
-                c.validOn ? "" : "(i)", c.coverage, c.bound, c.leak ? "  BEYOND" : "");
+                c.validOn ? "" : "(i)", c.coverage, c.bound, c.ref, c.refCount,
+                c.leak ? "  BEYOND" : "");
   }
   return 0;
 }
