@@ -159,42 +159,37 @@ int main(int argc, char** argv) {
     r.push_back(std::move(baked).value());
   }
   const LightmapBakeResult &off = r[0], &on = r[1];
-  // The finer bake's valid texels per object: (main sample, value).
-  std::vector<std::vector<std::pair<vec3, float>>> fine(on.scene.objects.size());
-  if (reference > 0.0f)
-    for (size_t p = 0; p < r[2].pages.size(); ++p) {
-      const LightmapPageResult& pg = r[2].pages[p];
-      for (size_t o = 0; o < r[2].layout.objects.size(); ++o) {
-        const AtlasObject& ao = r[2].layout.objects[o];
-        if (ao.lightmapIndex != int(p)) continue;
-        const int w = pg.light.width;
-        for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
-          for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
-            const size_t j = size_t(y) * size_t(w) + size_t(x);
-            if (!pg.valid[j] || pg.samples[j] == 0) continue;
-            fine[o].push_back({vec3(pg.position.pixels[3 * j], pg.position.pixels[3 * j + 1],
-                                    pg.position.pixels[3 * j + 2]),
-                               lum(pg.light, j)});
-          }
-      }
-    }
   auto tracer = Tracer::create(on.scene);
   if (!tracer) {
     std::fprintf(stderr, "%s\n", tracer.error().c_str());
     return 1;
   }
-  // Texel -> object, from the objects' rectangles.
+  // Texel -> object: the object of the surface nearest its main sample (with generated
+  // UVs an object's charts are packed one by one, so its rectangle holds other objects' too).
+  auto ownerOf = [&](const LightmapPageResult& pg, size_t j) {
+    const vec3 q(pg.position.pixels[3 * j], pg.position.pixels[3 * j + 1],
+                 pg.position.pixels[3 * j + 2]);
+    const auto ns = (*tracer)->nearestSurface(q, 1.0f);
+    return ns ? int(ns->object) : -1;
+  };
   std::vector<std::vector<int>> owner(on.pages.size());
-  for (size_t p = 0; p < on.pages.size(); ++p)
+  for (size_t p = 0; p < on.pages.size(); ++p) {
     owner[p].assign(on.pages[p].valid.size(), -1);
-  for (size_t o = 0; o < on.layout.objects.size(); ++o) {
-    const AtlasObject& ao = on.layout.objects[o];
-    if (ao.lightmapIndex < 0) continue;
-    const int w = on.pages[size_t(ao.lightmapIndex)].light.width;
-    for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
-      for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x)
-        owner[size_t(ao.lightmapIndex)][size_t(y) * size_t(w) + size_t(x)] = int(o);
+    for (size_t j = 0; j < owner[p].size(); ++j)
+      if (on.pages[p].samples[j] > 0) owner[p][j] = ownerOf(on.pages[p], j);
   }
+  // The finer bake's valid texels per object: (main sample, value).
+  std::vector<std::vector<std::pair<vec3, float>>> fine(on.scene.objects.size());
+  if (reference > 0.0f)
+    for (const LightmapPageResult& pg : r[2].pages)
+      for (size_t j = 0; j < pg.valid.size(); ++j) {
+        if (!pg.valid[j] || pg.samples[j] == 0) continue;
+        const int o = ownerOf(pg, j);
+        if (o < 0) continue;
+        fine[size_t(o)].push_back({vec3(pg.position.pixels[3 * j], pg.position.pixels[3 * j + 1],
+                                        pg.position.pixels[3 * j + 2]),
+                                   lum(pg.light, j)});
+      }
   size_t nonzero = 0, identical = 0, differ = 0, brighter = 0, darker = 0;
   double sumOff = 0.0, sumOn = 0.0;
   struct Change {
