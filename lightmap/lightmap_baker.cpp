@@ -657,6 +657,23 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
   return out;
 }
 
+// Whether own point i of a texel's `count` own points is inside geometry, decided as
+// lightPoints decides it without a grid (the point's share of the texel's paths, its first
+// rays' back faces over backfaceTolerance, else the enclosure test on the same stream),
+// without estimating its light: at most one ray per path (it stops once decided), plus
+// the enclosure rays.
+bool ownPointInside(const Integrator& integrator, const LightSettings& s, uint64_t key,
+                    const TexelPoint* points, uint32_t count, uint32_t i, float enclosedReach,
+                    uint64_t& extraRays) {
+  const uint32_t paths = std::max(s.samples, 1u);
+  const uint32_t first = uint32_t(uint64_t(i) * paths / count);
+  const uint32_t n = uint32_t(uint64_t(i + 1) * paths / count) - first;
+  const TexelPoint& p = points[i];
+  return integrator.firstRaysSeeBackFaces(p.position, p.normal, key, first, n,
+                                          s.backfaceTolerance) ||
+         enclosed(integrator, p, enclosedReach, hashValues(key, i), extraRays);
+}
+
 // Stage 5, one texel: with a footprint grid (TexelSample::footprintGrid), the mean over the
 // grid's visible points; when the grid has none (every point hidden from the main sample or
 // found inside: a texel wholly inside a solid whose main sample push-out moved out, or one
@@ -675,14 +692,24 @@ TexelLight lightTexel(const Integrator& integrator, const LightSettings& s, uint
     TexelLight g =
         lightPoints(integrator, s, key, grid, gridCount, true, enclosedReach, extraRays);
     if (g.valid) {
-      // A fill seed (TexelLight::onVisibleSurface) as without the grid: one of the texel's
-      // own points lies where it was rasterized. Its grid points are never moved, so they
-      // would make every texel beside a solid a seed, and fill texels inside the solid that
-      // no lookup at a visible point reads (a wall 2.5 texels thick standing on a floor:
-      // the floor's middle row under it, between the rows push-out moved to either face,
-      // took the mean of the sunlit outside and the room).
+      // A fill seed (TexelLight::onVisibleSurface) exactly as without the grid: one of the
+      // texel's own points lies where it was rasterized (push-out did not move it) and is
+      // not inside geometry by lightPoints' test on the rays it would trace there (the same
+      // first rays, ownPointInside). Its grid points are never moved, so they would make
+      // every texel beside a solid a seed, and fill texels inside the solid that no lookup
+      // at a visible point reads (a wall 2.5 texels thick standing on a floor: the floor's
+      // middle row under it, between the rows push-out moved to either face, took the mean
+      // of the sunlit outside and the room). Nor is "not moved" enough: a point more than
+      // push-out's reach inside a wall is not moved either, and where another wall's front
+      // face stands inside this one (walls that overlap at a corner) some of the texel's
+      // grid points see that face and count as valid (dark), so its own point must pass
+      // the inside test too (two_rooms at 10 texels per metre: floor texels under the south
+      // wall took the mean of the sunlit outside and the room, 0 -> 1.3).
       g.onVisibleSurface = false;
-      for (uint32_t i = 0; i < pointCount; ++i) g.onVisibleSurface |= !points[i].pushedOut;
+      for (uint32_t i = 0; i < pointCount && !g.onVisibleSurface; ++i)
+        g.onVisibleSurface = !points[i].pushedOut &&
+                             !ownPointInside(integrator, s, key, points, pointCount, i,
+                                             enclosedReach, extraRays);
       return g;
     }
   }

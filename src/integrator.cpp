@@ -490,6 +490,61 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
   }
 }
 
+bool Integrator::firstRaysSeeBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
+                                       uint32_t sampleCount, float share) const {
+  const float limit = share * float(sampleCount);
+  if (sampleCount == 0) return 0.0f > limit;
+  n = glm::normalize(n);
+  const Frame frame = Frame::fromNormal(n);
+  const vec3 origin = offsetRayOrigin(p, n);
+  uint32_t count = 0;
+  for (uint32_t s = firstSample; s < firstSample + sampleCount; ++s) {
+    // Decided: already above the limit, or not above it even if every ray left were counted.
+    if (float(count) > limit) return true;
+    if (!(float(count + (firstSample + sampleCount - s)) > limit)) return false;
+    SampleStream stream(key, s);
+    const vec3 local = squareToCosineHemisphere(draw2D(stream, 0, kSlotBsdf));
+    if (!(cosineHemispherePdf(local.z) > 0.0f)) continue;
+    // tracePath's first vertex (vertex 1), BLEND pass-throughs included, without its light.
+    Ray ray{origin, frame.toWorld(local), 0.0f, kInfinity};
+    vec3 beta(1.0f);
+    Hit h;
+    bool hit = false, absorbed = false;
+    int passes = 0;
+    for (;;) {
+      ++tRayCount;
+      hit = tracer_.intersect(ray, h);
+      if (!hit) break;
+      const Object& object = scene_.objects[h.object];
+      const MaterialTable::Entry& m = materials_->entries[object.triangleMaterial[h.triangle]];
+      if (m.alphaMode != AlphaMode::Blend) break;
+      const vec4 base = scene_.baseColorAt(h.object, h.triangle, h.bary);
+      const float u = passes == 0
+                          ? draw1D(stream, 1, kSlotBlend)
+                          : SampleStream(hashValues(key, kBlendTag,
+                                                    uint64_t(1) * kMaxPassThroughs + passes),
+                                         s)
+                                .get1D();
+      if (u >= 1.0f - base.a) break;  // reflects here: a BLEND surface, not counted
+      beta *= vec3(base);
+      if (++passes > kMaxPassThroughs || isBlack(beta)) {
+        absorbed = true;
+        break;
+      }
+      const vec3 y = positionOn(object, h.triangle, h.bary);
+      const vec3 ng = h.geometricNormal;
+      ray.origin = offsetRayOrigin(y, glm::dot(ng, ray.direction) > 0.0f ? ng : -ng);
+      ray.tMin = 0.0f;
+      ray.tMax = kInfinity;
+    }
+    if (!hit || absorbed) continue;
+    const MaterialTable::Entry& m =
+        materials_->entries[scene_.objects[h.object].triangleMaterial[h.triangle]];
+    if (h.backFace && !m.doubleSided && m.alphaMode != AlphaMode::Blend) ++count;
+  }
+  return float(count) > limit;
+}
+
 LightingEstimate Integrator::irradiance(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
                                         uint32_t sampleCount, uint32_t* backFaceHits,
                                         vec3* weightedDirection) const {

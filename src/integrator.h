@@ -111,6 +111,17 @@ class Integrator {
                               uint32_t sampleCount, uint32_t* backFaceHits = nullptr,
                               vec3* weightedDirection = nullptr) const;
 
+  // Whether the count irradiance(p, n, key, firstSample, sampleCount, &backFaceHits) adds
+  // to backFaceHits exceeds share x sampleCount, without estimating any light: the first
+  // cosine-sampled ray of each sample (the same direction, and the same BLEND pass-throughs,
+  // as irradiance's path) counts when it ends on the back of a single-sided, non-BLEND
+  // surface; it stops as soon as the answer is known. At most one ray per sample (more only
+  // through BLEND layers). The lightmap baker decides with it whether a texel's own points
+  // are inside geometry when it estimates the texel's light elsewhere (its footprint grid),
+  // so that the decision is the one a bake without the grid makes.
+  bool firstRaysSeeBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t firstSample,
+                             uint32_t sampleCount, float share) const;
+
   // Radiance arriving at p from unit direction `dir` (one path, sample `sampleIndex` of
   // stream `key`): direct = emission seen along the ray (sky, emissive surface); indirect =
   // light reflected towards p by the first surface hit. Punctual lights are deltas and are

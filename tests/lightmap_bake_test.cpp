@@ -5,6 +5,7 @@
 // thread counts, cancellation, presets and setting errors.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -467,6 +468,89 @@ TEST(LightmapBake, TwoRoomsNoSunLeaksThroughTheSharedWall) {
     EXPECT_LE(maxWallFace, bound);
     EXPECT_NEAR(maxA, sunlit, 1e-3f * sunlit);
     EXPECT_GT(patch, 20u);
+  }
+}
+
+
+
+TEST(LightmapBake, FloorTexelsUnderOverlappingWallsTakeNoLightFromOutside) {
+  // two_rooms and two_rooms_thin at 10 texels per metre: the outer walls are 0.25 m thick
+  // (2.5 texels) and overlap one another and the shared wall at their ends, and the floor
+  // slab runs on under them to a sunlit overhang outside. A floor texel whose main sample
+  // lies inside a wall, away from its faces (push-out moved it to neither), sees no light;
+  // it holds 0, or, filled because a neighbour has a point on the visible room floor, a
+  // mean of valid neighbours no brighter than the room floor beside that wall. The sunlit
+  // outside (E / pi about 3) must never reach it: near a wall that meets this one, another
+  // wall's front face stands inside it, some of a footprint grid's points there see it and
+  // count as valid (dark), and that made the texel a fill seed although its own point is
+  // inside, so its neighbour under the wall took the mean of the outside and the room
+  // (1.1-1.4 against at most 0.2 beside the wall in the room).
+  for (const char* name : {"two_rooms.gltf", "two_rooms_thin.gltf"}) {
+    SCOPED_TRACE(name);
+    const Scene scene = loadShipped(name);
+    ASSERT_FALSE(scene.objects.empty());
+    LightmapBakeSettings s;
+    s.resolution = 10.0f;
+    s.samplesPerTexel = 16;
+    s.denoise = false;
+    auto r = bakeLightmaps(scene, s);
+    ASSERT_TRUE(r.ok()) << r.error();
+    int floorIndex = -1;
+    for (size_t o = 0; o < r->scene.objects.size(); ++o)
+      if (r->scene.objects[o].name == "floor") floorIndex = int(o);
+    ASSERT_GE(floorIndex, 0);
+    const float shared = std::string(name) == "two_rooms.gltf" ? 0.25f : 0.05f;
+    const float xEnd = 8.0f + shared, t = 0.25f, e = 1e-3f;
+    const AtlasObject& ao = r->layout.objects[size_t(floorIndex)];
+    ASSERT_GE(ao.lightmapIndex, 0);
+    const LightmapPageResult& page = r->pages[size_t(ao.lightmapIndex)];
+    const int w = page.light.width;
+    // Per outer wall (south, north, west, east): texels inside it (main sample more than
+    // e from both faces; not within half a texel of the rooms' corners, where the floor's
+    // visible notch outside the wall ends may be a legitimate seed), and the room floor
+    // within 0.3 m of its inner face.
+    std::array<float, 4> under{}, strip{};
+    std::array<size_t, 4> underCount{}, stripCount{};
+    for (int y = ao.texelMin.y; y < ao.texelMin.y + ao.texelSize.y; ++y)
+      for (int x = ao.texelMin.x; x < ao.texelMin.x + ao.texelSize.x; ++x) {
+        const size_t i = size_t(y) * w + x;
+        if (page.samples[i] == 0) continue;  // padding
+        const vec3 p(page.position.pixels[3 * i], page.position.pixels[3 * i + 1],
+                     page.position.pixels[3 * i + 2]);
+        if (std::abs(p.y) > e) continue;  // the slab's top only
+        const float v = maxComponent(texel(page.light, i));
+        const bool alongX = p.x > 0.05f && p.x < xEnd - 0.05f;
+        const bool alongZ = p.z > 0.05f && p.z < 4.0f - 0.05f;
+        const std::array<bool, 4> inWall = {alongX && p.z > -t + e && p.z < -e,
+                                            alongX && p.z > 4.0f + e && p.z < 4.0f + t - e,
+                                            alongZ && p.x > -t + e && p.x < -e,
+                                            alongZ && p.x > xEnd + e && p.x < xEnd + t - e};
+        const bool inRoom = p.z >= 0.0f && p.z <= 4.0f &&
+                            ((p.x >= 0.0f && p.x <= 4.0f) || (p.x >= 4.0f + shared && p.x <= xEnd));
+        const std::array<bool, 4> inStrip = {inRoom && p.z < 0.3f, inRoom && p.z > 3.7f,
+                                             inRoom && p.x < 0.3f, inRoom && p.x > xEnd - 0.3f};
+        for (size_t k = 0; k < 4; ++k) {
+          if (inWall[k]) {
+            ++underCount[k];
+            under[k] = std::max(under[k], v);
+          }
+          if (inStrip[k]) {
+            ++stripCount[k];
+            strip[k] = std::max(strip[k], v);
+          }
+        }
+      }
+    const char* sides[4] = {"south", "north", "west", "east"};
+    for (size_t k = 0; k < 4; ++k) {
+      std::printf("%s %s wall: %zu floor texels inside it, max %.4f; room floor within 0.3 m: "
+                  "max %.4f over %zu\n",
+                  name, sides[k], underCount[k], under[k], strip[k], stripCount[k]);
+      EXPECT_GT(stripCount[k], 100u) << sides[k];
+      EXPECT_LE(under[k], strip[k]) << sides[k];
+    }
+    // Where texel centres fall inside a wall depends on the grid's alignment: measured 80-82
+    // under the south wall, 39 under the west one, 0-2 under the north and east ones.
+    EXPECT_GT(underCount[0] + underCount[2], 100u);
   }
 }
 
