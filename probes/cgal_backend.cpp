@@ -9,6 +9,9 @@
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/property_map.h>
+#include <CGAL/spatial_sort.h>
+#include <CGAL/Spatial_sort_traits_adapter_3.h>
 #include <CGAL/Triangulation_cell_base_with_info_3.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
@@ -38,12 +41,27 @@ using runtime_detail::prefetch;
 
 Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
   try {
-    std::vector<std::pair<Kernel::Point_3, int32_t>> input;
+    // CGAL's range insert with info sorts indices into the points and then reads each point
+    // and info through them, in an order that scatters over the arrays (a miss per point);
+    // sorting the (point, index) pairs themselves with the same spatial sort and inserting
+    // them as CGAL's plain range insert does (each point's vertex the next one's hint) reads
+    // them in order. The Delaunay triangulation does not depend on the order (CGAL's symbolic
+    // perturbation makes it unique), and the caller orders the cells canonically.
+    using Input = std::pair<Kernel::Point_3, int32_t>;
+    std::vector<Input> input;
     input.reserve(points.size());
     for (size_t i = 0; i < points.size(); ++i) {
       input.emplace_back(Kernel::Point_3(points[i].x, points[i].y, points[i].z), int32_t(i));
     }
-    Delaunay3 dt(input.begin(), input.end());
+    CGAL::spatial_sort(
+        input.begin(), input.end(),
+        CGAL::Spatial_sort_traits_adapter_3<Kernel, CGAL::First_of_pair_property_map<Input>>());
+    Delaunay3 dt;
+    Delaunay3::Vertex_handle hint;
+    for (const Input& in : input) {
+      hint = dt.insert(in.first, hint);
+      hint->info() = in.second;
+    }
     if (dt.dimension() != 3) {
       return Error{"CGAL: triangulation has dimension " + std::to_string(dt.dimension())};
     }
