@@ -698,6 +698,58 @@ TEST(ProbeFile, BadContentIsNamed) {
   }
 }
 
+// validateProbeSet's slot pass (four slots at a time where SSE2 is there) at the edges of every
+// range: each of these single-slot corruptions of a valid 3D set, in an inner cell near the
+// start, in the middle and at the end, and in an outer cell, is rejected and named.
+TEST(ProbeFile, EverySlotCorruptionAtTheRangeEdgesIsRejected) {
+  const ProbeSet good = build(cubeProbes(200, 91), DelaunayBackend::Cgal);
+  ASSERT_TRUE(validateProbeSet(good, "good").ok());
+  const int32_t np = good.probeCount(), nc = good.cellCount();
+  const int32_t inner = good.innerCellCount;
+  const std::vector<int32_t> probeValues = {np, np + 1, -1, -2, INT32_MIN, INT32_MAX};
+  const std::vector<int32_t> linkValues = {nc, nc + 1, -2, INT32_MIN, INT32_MAX};
+  int rejected = 0, tried = 0;
+  for (int32_t c : {0, 5, inner / 2, inner - 1, inner, nc - 1}) {
+    const int used = c < inner ? 4 : 3;
+    for (int k = 0; k < 4; ++k) {
+      for (int32_t value : k < used ? probeValues : std::vector<int32_t>{0, np - 1, np}) {
+        ProbeSet s = good;
+        s.cells[size_t(c)][k] = value;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_FALSE(st.ok()) << "cells[" << c << "][" << k << "] = " << value;
+        if (!st.ok()) {
+          EXPECT_NE(st.error().find("cells[" + std::to_string(c) + "][" + std::to_string(k) + "]"),
+                    std::string::npos)
+              << st.error();
+        }
+      }
+      for (int32_t value : linkValues) {
+        ProbeSet s = good;
+        s.neighbours[size_t(c)][k] = value;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_FALSE(st.ok()) << "neighbours[" << c << "][" << k << "] = " << value;
+      }
+      // A link to a cell in range that does not link back.
+      ProbeSet s = good;
+      const int32_t other = (c + nc / 3) % nc;
+      const glm::ivec4 back = s.neighbours[size_t(other)];
+      if (back[0] != c && back[1] != c && back[2] != c && back[3] != c) {
+        s.neighbours[size_t(c)][k] = other;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_NE(st.ok() ? std::string() : st.error(), std::string()) << "asymmetric link";
+      }
+    }
+  }
+  EXPECT_EQ(rejected, tried);
+  EXPECT_GT(tried, 200);
+}
+
 TEST(ProbeFile, RandomCorruptionNeverCrashes) {
   std::mt19937 rng(23);
   for (const ProbeSet& set : {smallSet(), smallSetWithVisibility()}) {
