@@ -348,9 +348,9 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
 
   // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
-  // then faces are matched instead), the hull faces (no tetrahedron beyond), the walk
-  // records, and the seed grid's candidates (each cell offered as buildProbeSeedGrid would, in
-  // the same order).
+  // then faces are matched instead), the hull faces (no tetrahedron beyond) and the seed
+  // grid's candidates (each cell offered as buildProbeSeedGrid would, in the same order); then
+  // the walk records over the finished cells, four at a time (makeProbeWalkCells).
   auto face = [&](int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
@@ -367,7 +367,6 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     std::vector<int32_t> newIndex(tets.size());
     for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
     hull.reserve(hullFaces);
-    s.walk.reserve(size_t(inner));
     runtime_detail::SeedGridBuilder grid(s.positions, 3, inner, settings.cellsPerSeed);
     for (int32_t i = 0; i < inner; ++i) {
       // The backend's records are read in the new order, scattered over 20 MB: fetch the
@@ -394,11 +393,11 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
         }
       }
       s.neighbours.push_back(links);
-      const glm::vec3 a = Q[size_t(t.v[0])], b = Q[size_t(t.v[1])], c = Q[size_t(t.v[2])],
-                      d = Q[size_t(t.v[3])];
-      makeProbeWalkCell({a, b, c, d}, s.walk.emplace_back());
-      grid.offer(i, a + b + c + d);
+      grid.offer(i, ((Q[size_t(t.v[0])] + Q[size_t(t.v[1])]) + Q[size_t(t.v[2])]) +
+                        Q[size_t(t.v[3])]);
     }
+    s.walk.resize(size_t(inner));
+    makeProbeWalkCells(s.positions, s.cells, s.walk.data());
     s.grid = grid.finish();
   } else {
     for (int32_t i = 0; i < inner; ++i) {
@@ -724,7 +723,7 @@ Result<ProbeSet> buildProbeTopology(std::span<const glm::vec3> positions,
   if (set.outerCells.size() != set.cells.size() - size_t(set.innerCellCount)) {
     set.outerCells.resize(set.cells.size() - size_t(set.innerCellCount));
   }
-  // build3 makes the walk records in its pass over the cells (unless it had to match faces).
+  // build3 makes the walk records after its pass over the cells (unless it had to match faces).
   if (set.dimension != 3 || set.walk.size() != size_t(set.innerCellCount)) {
     prepareProbeLookup(set);
   }

@@ -475,6 +475,59 @@ TEST(ProbeLookup, FastWalkFindsTheExactWalksCellOnAMillionPoints) {
   expectFastMatchesExact(build(grid, DelaunayBackend::Cgal), 400000, 32);
 }
 
+// makeProbeWalkCells computes four records at a time in SIMD lanes where the CPU allows; each
+// must equal makeProbeWalkCell's for the same corners, bit for bit, whatever branch the
+// single-cell code takes: random tetrahedra (about 4 in 10 have a cross-product component that
+// cancels and takes Kahan's FMA form), slivers (determinant test fails), corners whose
+// exponents differ by more than 29 (inexact edges), huge cells (gradients below the normal
+// floats), exactly flat cells, and a count that is not a multiple of four (the tail).
+TEST(ProbeLookup, WalkRecordsInLanesEqualTheSingleCellOnes) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<glm::vec3> positions;
+  std::vector<glm::ivec4> cells;
+  auto add = [&](std::array<glm::vec3, 4> v) {
+    if (orient3d(v[0], v[1], v[2], v[3]) < 0.0) std::swap(v[2], v[3]);
+    const int32_t first = int32_t(positions.size());
+    positions.insert(positions.end(), v.begin(), v.end());
+    cells.emplace_back(first, first + 1, first + 2, first + 3);
+  };
+  auto point = [&]() { return glm::vec3(u(rng), u(rng), u(rng)); };
+  for (int i = 0; i < 4001; ++i) {
+    const int kind = i % 8;
+    std::array<glm::vec3, 4> v{point(), point(), point(), point()};
+    if (kind == 5) v[3] = 0.5f * (v[0] + v[1]) + 1e-6f * point();        // sliver
+    if (kind == 6) v[i / 8 % 4] = std::ldexp(1.0f, -40) * point();      // tiny exponents
+    if (kind == 7 && i % 16 == 7) for (auto& x : v) x *= 1e38f;          // huge cell
+    if (kind == 7 && i % 16 == 15) v[3] = v[0] + (v[1] - v[0]) * 0.25f;  // flat or nearly
+    add(v);
+  }
+  // Shared corners too (cells of a real set), in an order that puts each kind in every lane.
+  const ProbeSet set = build(cubeProbes(500, 78), DelaunayBackend::Cgal);
+  const int32_t offset = int32_t(positions.size());
+  positions.insert(positions.end(), set.positions.begin(), set.positions.end());
+  for (int32_t c = 0; c < set.innerCellCount; ++c) cells.push_back(set.cells[size_t(c)] + offset);
+  std::shuffle(cells.begin(), cells.end(), rng);
+  cells.pop_back();
+  ASSERT_NE(cells.size() % 4, 0u);
+
+  std::vector<ProbeWalkCell> lanes(cells.size()), single(cells.size());
+  makeProbeWalkCells(positions, cells, lanes.data());
+  int failed = 0, bounded = 0;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    const glm::ivec4 t = cells[c];
+    makeProbeWalkCell({positions[size_t(t[0])], positions[size_t(t[1])], positions[size_t(t[2])],
+                       positions[size_t(t[3])]},
+                      single[c]);
+    failed += std::isnan(single[c].x[0]);
+    bounded += std::isfinite(single[c].inside);
+    EXPECT_EQ(std::memcmp(&lanes[c], &single[c], sizeof(ProbeWalkCell)), 0) << "cell " << c;
+  }
+  // Both outcomes occur: records that failed (NaN gradients) and ones with a finite bound.
+  EXPECT_GT(failed, 300);
+  EXPECT_GT(bounded, 3000);
+}
+
 TEST(ProbeLookup, IrradianceOfAConstantEnvironmentIsPiTimesRadiance) {
   // Constant radiance L: c0 = L * sqrt(4 pi) / ... projection gives c0 = L * 4 pi * Y00.
   ShL2Rgb sh;
@@ -643,6 +696,58 @@ TEST(ProbeFile, BadContentIsNamed) {
     EXPECT_NE(parseError(serializeProbeSet(s)).find("unused slot must be -1"),
               std::string::npos);
   }
+}
+
+// validateProbeSet's slot pass (four slots at a time where SSE2 is there) at the edges of every
+// range: each of these single-slot corruptions of a valid 3D set, in an inner cell near the
+// start, in the middle and at the end, and in an outer cell, is rejected and named.
+TEST(ProbeFile, EverySlotCorruptionAtTheRangeEdgesIsRejected) {
+  const ProbeSet good = build(cubeProbes(200, 91), DelaunayBackend::Cgal);
+  ASSERT_TRUE(validateProbeSet(good, "good").ok());
+  const int32_t np = good.probeCount(), nc = good.cellCount();
+  const int32_t inner = good.innerCellCount;
+  const std::vector<int32_t> probeValues = {np, np + 1, -1, -2, INT32_MIN, INT32_MAX};
+  const std::vector<int32_t> linkValues = {nc, nc + 1, -2, INT32_MIN, INT32_MAX};
+  int rejected = 0, tried = 0;
+  for (int32_t c : {0, 5, inner / 2, inner - 1, inner, nc - 1}) {
+    const int used = c < inner ? 4 : 3;
+    for (int k = 0; k < 4; ++k) {
+      for (int32_t value : k < used ? probeValues : std::vector<int32_t>{0, np - 1, np}) {
+        ProbeSet s = good;
+        s.cells[size_t(c)][k] = value;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_FALSE(st.ok()) << "cells[" << c << "][" << k << "] = " << value;
+        if (!st.ok()) {
+          EXPECT_NE(st.error().find("cells[" + std::to_string(c) + "][" + std::to_string(k) + "]"),
+                    std::string::npos)
+              << st.error();
+        }
+      }
+      for (int32_t value : linkValues) {
+        ProbeSet s = good;
+        s.neighbours[size_t(c)][k] = value;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_FALSE(st.ok()) << "neighbours[" << c << "][" << k << "] = " << value;
+      }
+      // A link to a cell in range that does not link back.
+      ProbeSet s = good;
+      const int32_t other = (c + nc / 3) % nc;
+      const glm::ivec4 back = s.neighbours[size_t(other)];
+      if (back[0] != c && back[1] != c && back[2] != c && back[3] != c) {
+        s.neighbours[size_t(c)][k] = other;
+        const Status st = validateProbeSet(s, "bad");
+        ++tried;
+        rejected += !st.ok();
+        EXPECT_NE(st.ok() ? std::string() : st.error(), std::string()) << "asymmetric link";
+      }
+    }
+  }
+  EXPECT_EQ(rejected, tried);
+  EXPECT_GT(tried, 200);
 }
 
 TEST(ProbeFile, RandomCorruptionNeverCrashes) {

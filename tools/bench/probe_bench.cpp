@@ -23,7 +23,8 @@
 //     count, with the visibility block (visibility:1) and without it (0); hidden_share is the
 //     share of the blend's probe tests that find the point (partly) hidden (v < 1).
 // Tetrahedralization: buildProbeTopology (Delaunay + outer cells + seed grid) with TetGen and
-// with CGAL for 1k, 10k and 100k random probes.
+// with CGAL for 1k, 10k and 100k random probes; BM_CgalDelaunay, a bare CGAL Delaunay of the
+// same points; BM_TetrahedralizeOverCgalDelaunay, the two in each iteration and their ratio.
 // Each benchmark reports items_per_second (lookups, or probes tetrahedralized).
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -31,6 +32,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 #include <map>
 #include <memory>
 #include <random>
@@ -310,6 +312,50 @@ void BM_CgalDelaunay(benchmark::State& state) {
   state.SetItemsProcessed(int64_t(state.iterations()) * state.range(0));
 }
 
+// The ratio issue 16 asks about, measured like with like: in each iteration the bare CGAL
+// Delaunay of BM_CgalDelaunay and the whole topology build of BM_Tetrahedralize (CGAL backend:
+// cells, links, outer cells, seed grid, walk records, validation) on the same points, one
+// after the other on this thread, each timed by the thread's CPU clock (so other processes on
+// a loaded machine count as little as they can). Counters: cgal_ms, build_ms and ratio =
+// build_ms / cgal_ms, summed over the iterations; with --benchmark_repetitions the medians.
+double threadCpuMs() {
+  timespec t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
+}
+
+void BM_TetrahedralizeOverCgalDelaunay(benchmark::State& state) {
+  const std::vector<glm::vec3> positions = randomPoints(size_t(state.range(0)), 3);
+  ProbeTopologySettings settings;
+  settings.backend = DelaunayBackend::Cgal;
+  double cgal = 0.0, build = 0.0;
+  for (auto _ : state) {
+    const double t0 = threadCpuMs();
+    {
+      std::vector<Kernel::Point_3> pts;
+      pts.reserve(positions.size());
+      for (const auto& p : positions) pts.emplace_back(p.x, p.y, p.z);
+      CgalDelaunay dt(pts.begin(), pts.end());
+      benchmark::DoNotOptimize(dt.number_of_cells());
+    }
+    const double t1 = threadCpuMs();
+    {
+      Result<ProbeSet> set = buildProbeTopology(positions, settings);
+      if (!set) {
+        state.SkipWithError(set.error().c_str());
+        return;
+      }
+      benchmark::DoNotOptimize(set->cells.data());
+    }
+    const double t2 = threadCpuMs();
+    cgal += t1 - t0;
+    build += t2 - t1;
+  }
+  state.counters["cgal_ms"] = cgal / double(state.iterations());
+  state.counters["build_ms"] = build / double(state.iterations());
+  state.counters["ratio"] = build / cgal;
+}
+
 BENCHMARK(BM_LocateHinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateUnhinted)->Arg(1000)->Arg(10000)->Arg(100000);
 BENCHMARK(BM_LocateUnhintedBatch)->Arg(1000)->Arg(10000)->Arg(100000);
@@ -333,6 +379,11 @@ BENCHMARK(BM_Tetrahedralize)
     ->Args({1, 1000})
     ->Args({0, 10000})
     ->Args({1, 10000})
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TetrahedralizeOverCgalDelaunay)
+    ->ArgName("probes")
+    ->Arg(100000)
+    ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Tetrahedralize)
     ->ArgNames({"backend", "probes"})

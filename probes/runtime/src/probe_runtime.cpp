@@ -897,6 +897,137 @@ bool walkRecord(const glm::vec3 v[4], ProbeWalkCell& w) {
   return loc;
 }
 
+// walkRecord for four cells side by side (one cell per lane of an AVX2 register, with FMA for
+// Kahan's form): the same operations in the same order, and FMA rounds as std::fma does, so
+// every lane's record is walkRecord's bit for bit. Compiled for AVX2 + FMA and called only on
+// CPUs that have them (makeProbeWalkCells asks); floating-point contraction is off in it, so
+// that the compiler fuses no product into an add that walkRecord rounds separately. A lane that
+// walkRecord would fail (an inexact edge, a failed determinant test, a gradient entry that
+// rounds to a subnormal or overflows) is reported in the returned mask and left to walkRecord.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define KILN_WALK_RECORDS4 1
+#pragma GCC push_options
+#pragma GCC target("avx2,fma")
+#pragma GCC optimize("fp-contract=off")
+#pragma GCC diagnostic push
+using V4d = double __attribute__((vector_size(32)));
+using V4l = int64_t __attribute__((vector_size(32)));
+using V4f = float __attribute__((vector_size(16)));
+using V4i = int32_t __attribute__((vector_size(16)));
+
+struct V3 {
+  V4d x, y, z;
+};
+
+inline V4d vabs(V4d a) { return V4d(V4l(a) & (V4l{} + INT64_MAX)); }
+
+// Lanes whose b - a (floats widened) is inexact in double, as walkRecord's `difference`.
+inline V3 vdifference(const V3& b, const V3& a, V4l& bad) {
+  auto one = [&](V4d x, V4d y) {
+    const V4d d = x - y;
+    const V4d bv = d - x, av = d - bv;
+    bad |= ((x - av) + (-y - bv)) != 0.0;
+    return d;
+  };
+  return {one(b.x, a.x), one(b.y, a.y), one(b.z, a.z)};
+}
+
+// walkRecord's a b - c d and its error bound: plain, or Kahan's FMA form where it cancels.
+inline V4d vdiff(V4d a, V4d b, V4d c, V4d d, V4d& error) {
+  const V4d ab = a * b, cd = c * d, plain = ab - cd;
+  const V4d size = vabs(ab) + vabs(cd);
+  const V4l isPlain = vabs(plain) >= 0.125 * size;
+  const V4d kahan = V4d(_mm256_fmadd_pd(__m256d(a), __m256d(b), __m256d(-cd))) +
+                    V4d(_mm256_fmadd_pd(__m256d(-c), __m256d(d), __m256d(cd)));
+  error = isPlain ? 0x1p-52 * size : 0x1p-51 * vabs(kahan);
+  return isPlain ? plain : kahan;
+}
+
+inline V3 vcross(const V3& a, const V3& b, V3& error) {
+  return {vdiff(a.y, b.z, a.z, b.y, error.x), vdiff(a.z, b.x, a.x, b.z, error.y),
+          vdiff(a.x, b.y, a.y, b.x, error.z)};
+}
+
+inline V4d vdot(const V3& a, const V3& b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
+inline V3 vabs(const V3& a) { return {vabs(a.x), vabs(a.y), vabs(a.z)}; }
+
+// Float bits of x that walkRecord rejects: neither zero nor normal.
+inline V4i notNormal(V4f x) {
+  const V4i bits = V4i(x), exponent = bits & 0x7f800000;
+  return ((bits & 0x7fffffff) != 0) & ((exponent == 0) | (exponent == 0x7f800000));
+}
+
+// Records for cells[0..3] into out[0..3]; returns a mask of the lanes left to walkRecord.
+unsigned walkRecords4(const glm::vec3* positions, const glm::ivec4* cells, ProbeWalkCell* out) {
+  V3 v[4];
+  for (int j = 0; j < 4; ++j) {
+    for (int l = 0; l < 4; ++l) {
+      const glm::vec3 p = positions[size_t(cells[l][j])];
+      v[j].x[l] = double(p.x);
+      v[j].y[l] = double(p.y);
+      v[j].z[l] = double(p.z);
+    }
+  }
+  V4l bad{};
+  V3 e[3], f[2];
+  for (int j = 0; j < 3; ++j) e[j] = vdifference(v[j + 1], v[0], bad);
+  f[0] = vdifference(v[2], v[1], bad);
+  f[1] = vdifference(v[3], v[1], bad);
+  V3 c[4], error[4];
+  c[0] = vcross(f[0], f[1], error[0]);
+  for (int k = 0; k < 3; ++k) c[k + 1] = vcross(e[(k + 1) % 3], e[(k + 2) % 3], error[k + 1]);
+  const V4d det = vdot(e[0], c[1]);
+  const V3 absE0 = vabs(e[0]);
+  const V4d detError = vdot(absE0, error[1]) + 0x1p-51 * vdot(absE0, vabs(c[1]));
+  bad |= ~((det > 0.0) & (detError <= 0x1p-28 * det));
+  const V4d inverse = 1.0 / det;
+  const V3 extent = {(vabs(e[0].x) + vabs(e[1].x)) + vabs(e[2].x),
+                     (vabs(e[0].y) + vabs(e[1].y)) + vabs(e[2].y),
+                     (vabs(e[0].z) + vabs(e[1].z)) + vabs(e[2].z)};
+  V4d sumT{}, maxT{};
+  V4f g[4][3];
+  V4i badFloat{};
+  for (int k = 0; k < 4; ++k) {
+    const V4d scale = k == 0 ? -inverse : inverse;
+    const V3 gk = {scale * c[k].x, scale * c[k].y, scale * c[k].z};
+    g[k][0] = __builtin_convertvector(gk.x, V4f);
+    g[k][1] = __builtin_convertvector(gk.y, V4f);
+    g[k][2] = __builtin_convertvector(gk.z, V4f);
+    for (int a = 0; a < 3; ++a) badFloat |= notNormal(g[k][a]);
+    const V4d t = vdot(vabs(gk), extent);
+    sumT += t;
+    maxT = maxT < t ? t : maxT;
+  }
+  const V4d bound = 8.0 * double(kUnitRoundoff) * maxT * (1.0 + 0x1p-20) +
+                    4.0 * double(kUnitRoundoff) + double(kTiny);
+  V4f inside = __builtin_convertvector(bound, V4f);
+  // Rounded up: the next float above where the rounding went down (bound > 0, finite).
+  inside = V4f(V4i(inside) - V4i(__builtin_convertvector(__builtin_convertvector(inside, V4d) <
+                                                             bound, V4i)));
+  const V4i tight = __builtin_convertvector(sumT * double(kUnitRoundoff) <= 0x1p-10, V4i);
+  inside = tight ? inside : V4f{} + std::numeric_limits<float>::infinity();
+  unsigned left = 0;
+  for (int l = 0; l < 4; ++l) {
+    if (bad[l] != 0 || badFloat[l] != 0) {
+      left |= 1u << l;
+      continue;
+    }
+    ProbeWalkCell& w = out[l];
+    w.origin = glm::vec3(float(v[0].x[l]), float(v[0].y[l]), float(v[0].z[l]));
+    for (int k = 0; k < 4; ++k) {
+      w.x[size_t(k)] = g[k][0][l];
+      w.y[size_t(k)] = g[k][1][l];
+      w.z[size_t(k)] = g[k][2][l];
+    }
+    w.inside = inside[l];
+  }
+  return left;
+}
+
+#pragma GCC diagnostic pop
+#pragma GCC pop_options
+#endif
+
 }  // namespace
 
 void makeProbeWalkCell(const std::array<glm::vec3, 4>& v, ProbeWalkCell& w) {
@@ -910,18 +1041,39 @@ void makeProbeWalkCell(const std::array<glm::vec3, 4>& v, ProbeWalkCell& w) {
   }
 }
 
+void makeProbeWalkCells(std::span<const glm::vec3> positions, std::span<const glm::ivec4> cells,
+                        ProbeWalkCell* out) {
+  const size_t n = cells.size();
+  size_t c = 0;
+#ifdef KILN_WALK_RECORDS4
+  const bool simd = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  for (; simd && c + 4 <= n; c += 4) {
+    const unsigned left = walkRecords4(positions.data(), cells.data() + c, out + c);
+    for (int l = 0; l < 4; ++l) {
+      if (!(left >> l & 1)) continue;
+      const glm::ivec4 t = cells[c + size_t(l)];
+      makeProbeWalkCell({positions[size_t(t[0])], positions[size_t(t[1])],
+                         positions[size_t(t[2])], positions[size_t(t[3])]},
+                        out[c + size_t(l)]);
+    }
+  }
+#endif
+  for (; c < n; ++c) {
+    const glm::ivec4 t = cells[c];
+    makeProbeWalkCell({positions[size_t(t[0])], positions[size_t(t[1])],
+                       positions[size_t(t[2])], positions[size_t(t[3])]},
+                      out[c]);
+  }
+}
+
 void prepareProbeLookup(ProbeSet& s) {
   s.walk.clear();
   if (s.dimension != 3 || s.innerCellCount <= 0 || s.cells.size() < size_t(s.innerCellCount)) {
     return;
   }
-  s.walk.reserve(size_t(s.innerCellCount));
-  for (int32_t c = 0; c < s.innerCellCount; ++c) {
-    const glm::ivec4 t = s.cells[size_t(c)];
-    makeProbeWalkCell({s.positions[size_t(t[0])], s.positions[size_t(t[1])],
-                       s.positions[size_t(t[2])], s.positions[size_t(t[3])]},
-                      s.walk.emplace_back());
-  }
+  s.walk.resize(size_t(s.innerCellCount));
+  makeProbeWalkCells(s.positions, std::span(s.cells).first(size_t(s.innerCellCount)),
+                     s.walk.data());
 }
 
 ProbeLocation locateProbe(const ProbeSet& s, glm::vec3 p, int32_t hint,

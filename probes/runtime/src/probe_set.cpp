@@ -10,6 +10,10 @@
 #include <cstring>
 #include <limits>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include "binary_file.h"
 #include "kiln/probe_runtime.h"
 #include "prefetch.h"
@@ -232,6 +236,35 @@ bool cellSlotsValid(const ProbeSet& s) {
       }
       const glm::ivec4 v = s.cells[c], n = s.neighbours[c];
       const int32_t ci = int32_t(c);
+#ifdef __SSE2__
+      // The same tests on the four slots at once: unsigned compares as signed ones of the
+      // values with their top bit flipped; a back row holds c when any of its lanes does.
+      // (np and nc + 1 as 32-bit bounds: int32 indices cannot reach beyond them anyway, and a
+      // truncated bound could only reject, never accept.)
+      const __m128i flip = _mm_set1_epi32(INT32_MIN);
+      const __m128i vv = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&v));
+      const __m128i nn = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&n));
+      const __m128i unused = _mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(used));
+      const __m128i inRange = _mm_cmplt_epi32(_mm_xor_si128(vv, flip),
+                                              _mm_set1_epi32(int32_t(uint32_t(np) ^ 0x80000000u)));
+      const __m128i isMinusOne = _mm_cmpeq_epi32(vv, _mm_set1_epi32(-1));
+      // Slot ok: used and in range, or unused and -1.
+      const __m128i slotOk = _mm_or_si128(_mm_and_si128(unused, inRange),
+                                          _mm_andnot_si128(unused, isMinusOne));
+      // -1 .. nc - 1: n + 1 <= nc unsigned, i.e. n + 1 < nc + 1.
+      const __m128i linkOk = _mm_cmplt_epi32(
+          _mm_xor_si128(_mm_add_epi32(nn, _mm_set1_epi32(1)), flip),
+          _mm_set1_epi32(int32_t((uint32_t(nc) + 1u) ^ 0x80000000u)));
+      ok &= _mm_movemask_epi8(_mm_and_si128(slotOk, linkOk)) == 0xffff;
+      const __m128i cc = _mm_set1_epi32(ci);
+      for (int k = 0; k < 4; ++k) {
+        // Read the named cell's links only when the index is in range (else a link to c
+        // itself stands in, and the range test above has already failed).
+        const glm::ivec4& back = s.neighbours[uint32_t(n[k]) < nc ? size_t(n[k]) : c];
+        const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&back));
+        ok &= n[k] < 0 || _mm_movemask_epi8(_mm_cmpeq_epi32(b, cc)) != 0;
+      }
+#else
       for (int k = 0; k < 4; ++k) {
         ok &= k < used ? uint32_t(v[k]) < np : v[k] == -1;
         ok &= uint32_t(n[k] + 1) <= nc;  // -1 .. nc - 1
@@ -240,6 +273,7 @@ bool cellSlotsValid(const ProbeSet& s) {
         const glm::ivec4 back = s.neighbours[uint32_t(n[k]) < nc ? size_t(n[k]) : c];
         ok &= n[k] < 0 || back[0] == ci || back[1] == ci || back[2] == ci || back[3] == ci;
       }
+#endif
     }
   };
   cells(0, inner, usedSlots(s.dimension, false));

@@ -154,6 +154,11 @@ void prepareProbeLookup(ProbeSet& set);
 // positions (positively oriented): for a builder that writes the records in its own pass over
 // the cells (buildProbeTopology).
 void makeProbeWalkCell(const std::array<glm::vec3, 4>& corners, ProbeWalkCell& out);
+// The records of `cells` (inner tetrahedra, positively oriented, indices into `positions`)
+// into out[0 .. cells.size()), each equal bit for bit to makeProbeWalkCell's (four cells at a
+// time in SIMD lanes; prepareProbeLookup and buildProbeTopology use it).
+void makeProbeWalkCells(std::span<const glm::vec3> positions, std::span<const glm::ivec4> cells,
+                        ProbeWalkCell* out);
 
 // Builds set.grid: about `targetCellsPerSeed` cells per grid cell, at most kSeedGridMaxAxis
 // per axis, each seed a cell whose centroid lies in the grid cell (the one nearest its
