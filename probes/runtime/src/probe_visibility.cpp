@@ -142,20 +142,28 @@ float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDis
   // cut is a ramp minSigma wide, so v stays continuous in d.
   float reach = std::clamp(1.0f - (d - far) / minSigma, kHiddenReach, 1.0f);
   // Silhouettes: a texel k whose every ray stopped short of the point (d beyond far_k) next
-  // to a texel j whose centre depth lies well beyond that (mu_j > (1 + kSilhouetteGap) far_k:
-  // a depth edge, not a tilted surface) hides the point, weighted by both texels' shares of
+  // to a texel j whose depth reaches well beyond that (mu_j + sigma_j > (1 + kSilhouetteGap)
+  // far_k: a depth edge, not a tilted surface whose next texel continues its depth; sigma_j
+  // counts because a texel holding the edge itself has a mean near the wall's depth and a
+  // large spread) hides the point, weighted by both texels' shares of
   // the footprint (1 from a bilinear weight of 1 / kSilhouetteShare up, 0 at weight 0, so the
   // cut is continuous where a texel enters the footprint). Interpolating across the edge
   // would let the far side's depth pass a point that lies behind the near side's surface.
   float cut = 0.0f;
   const float dUnorm = d * 65535.0f, rampUnorm = inverseRamp * kUnorm16;
-  for (int k = 0; k < 4; ++k) {
-    const float edge = (1.0f + kSilhouetteGap) * texelFar[k];
-    float gap = 0.0f;
-    for (int j = 0; j < 4; ++j)
-      gap = std::max(gap, share[j] * std::clamp((texelReach[j] - edge) * rampUnorm, 0.0f, 1.0f));
-    const float behind = std::clamp((dUnorm - texelFar[k]) * rampUnorm, 0.0f, 1.0f);
-    cut = std::max(cut, share[k] * gap * behind);
+  // A point short of every texel's farthest ray (most visible points) has nothing to cut.
+  const float nearestFar =
+      std::min(std::min(texelFar[0], texelFar[1]), std::min(texelFar[2], texelFar[3]));
+  if (dUnorm > nearestFar) {
+    for (int k = 0; k < 4; ++k) {
+      const float edge = (1.0f + kSilhouetteGap) * texelFar[k];
+      float gap = 0.0f;
+      for (int j = 0; j < 4; ++j)
+        gap = std::max(gap,
+                       share[j] * std::clamp((texelReach[j] - edge) * rampUnorm, 0.0f, 1.0f));
+      const float behind = std::clamp((dUnorm - texelFar[k]) * rampUnorm, 0.0f, 1.0f);
+      cut = std::max(cut, share[k] * gap * behind);
+    }
   }
   reach = std::max(std::min(reach, 1.0f - cut), kHiddenReach);
   if (d <= mean) return std::max(reach, kVisibilityFloor);
