@@ -34,6 +34,16 @@ export const scenes = [
     exposure: 1,
   },
   {
+    // The Cornell box with the short block's five faces and the tall block's top too small
+    // for a lightmap (--min-object-texels 150 at 60 texels per unit): three.js lights them
+    // from the probe light the bake wrote on their nodes (extras.kiln.probeSH), which
+    // compare_with_kiln_render.mjs compares with kiln render on their pixels alone.
+    name: 'cornell_box_probe_lit', scene: 'cornell_box.gltf', ldr: 'dldr',
+    bake: ['--preset', 'low', '--resolution', '60', '--min-object-texels', '150'],
+    from: [0.278, 0.273, -0.8], at: [0.278, 0.273, 0.2], fov: 39.3076481, size: [256, 256],
+    exposure: 0, probeLitInView: true,
+  },
+  {
     name: 'courtyard', scene: 'courtyard.gltf', ldr: 'dldr',
     bake: ['--preset', 'low'],
     from: [5.0, 11.0, -13.0], at: [4.669, 10.4207, -12.2552], fov: 60, size: [320, 180],
