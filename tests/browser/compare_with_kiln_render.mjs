@@ -36,8 +36,11 @@ const TOLERANCE = 0.02;  // relative mean difference, both in display and linear
 // render). Both evaluate the same SH for the same normals; what remains is rasterization
 // against ray casting at pixel centres and the half-float / 8-bit base colour textures.
 const PROBE_TOLERANCE = 0.03;
-// Fewer probe-lit pixels than this (after shrinking) are too few to compare.
-const PROBE_MIN_PIXELS = 30;
+// Fewer probe-lit pixels than this (after shrinking) are too few to compare: they are then
+// mostly the edges of thin, distant objects (the breakfast room's chair legs from its main
+// camera: 144 pixels, 2.1% apart), where three.js's mipmapped base colour textures and kiln
+// render's full-resolution bilinear lookups differ, not the probe light.
+const PROBE_MIN_PIXELS = 500;
 
 const args = parseArgs(process.argv.slice(2), ['kiln', 'bakes', 'out'],
                        'compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR [--shared DIR] [--chromium PATH]');
