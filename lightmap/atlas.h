@@ -65,9 +65,10 @@ Status checkTexelBudget(const std::vector<AtlasPage>& pages, const std::string& 
 // Default of AtlasSettings::minObjectTexels, UnwrapSettings::minObjectTexels and kiln bake's
 // --min-object-texels: negative = automatic (tooSmallForLightmap; `--min-object-texels auto`);
 // 0 = every lightmapped object gets a lightmap; N > 0 = objects under N texels are lit by
-// probes. 0 by default: the output glTF gives a probe-lit object no lighting of its own, so a
-// viewer without kiln's probes (three.js, browser_real_scene) draws it black.
-inline constexpr float kMinObjectTexels = 0.0f;
+// probes. Automatic by default: kiln bake gives each probe-lit object its own probe light
+// (lightmap/probe_lit.h) in the manifest and the output glTF, which kiln render and the three.js
+// plugin (tools/web/kiln-lightmap.js) light it with.
+inline constexpr float kMinObjectTexels = -1.0f;
 
 // The automatic rule takes small props, as a Unity user sets Receive GI: Light Probes on
 // them: an object whose UVs kiln generates (no TEXCOORD_1: nobody made it a lightmap) whose

@@ -869,6 +869,7 @@ class OutputGltfBuilder {
                        lightmapped && options_.atlasUv ? so : kIdentityUv,
                        lightmapped && options_.atlasUv ? kIdentityUv : so};
     if (Status s = markLightmappedNode(e); !s) return s;
+    markProbeLitNode(e);
     const bool generated = i < result_.unwraps.size() && result_.unwraps[i].has_value();
     if (!generated && !(lightmapped && options_.atlasUv)) return Status::success();
     return rebuildNodeMesh(e, generated);
@@ -909,6 +910,34 @@ class OutputGltfBuilder {
       lightmapUsed_ = true;
     }
     return Status::success();
+  }
+
+  // A probe-lit node's own light (lightmap/probe_lit.h): extras.kiln.probeSH (27 numbers, the
+  // manifest's "probeSH") and, when some light has a shadowmask channel, .probeOcclusion.
+  // An input that is itself a bake's output loses the earlier bake's values.
+  void markProbeLitNode(const ObjectEdit& e) {
+    if (e.node.contains("extras") && e.node["extras"].is_object() &&
+        e.node["extras"].contains("kiln") && e.node["extras"]["kiln"].is_object()) {
+      e.node["extras"]["kiln"].erase("probeSH");
+      e.node["extras"]["kiln"].erase("probeOcclusion");
+    }
+    if (e.index >= result_.objectProbes.size() || !result_.objectProbes[e.index]) return;
+    const ObjectProbe& probe = *result_.objectProbes[e.index];
+    Json* k = kilnExtras(e.node);
+    if (!k) {
+      out_.warnings.push_back(scenePath_ + ": " + e.where +
+                              ": extras is not an object; its probe light is only in "
+                              "manifest.json");
+      return;
+    }
+    Json sh = Json::array();
+    for (const vec3& c : probe.sh.c) sh.insert(sh.end(), {c.x, c.y, c.z});
+    (*k)["probeSH"] = std::move(sh);
+    bool withShadowmask = false;
+    for (int c : result_.lightModes.shadowmaskChannel) withShadowmask |= c >= 0;
+    if (withShadowmask)
+      (*k)["probeOcclusion"] = {probe.occlusion.x, probe.occlusion.y, probe.occlusion.z,
+                                probe.occlusion.w};
   }
 
   // The node's new TEXCOORD_1: --atlas-uv on its own TEXCOORD_1 changes the mesh in place

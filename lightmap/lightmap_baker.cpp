@@ -39,6 +39,7 @@
 #include <memory>
 
 #include "lightmap/directional.h"
+#include "lightmap/probe_lit.h"
 #include "lightmap/postprocess.h"
 #include "lightmap/seams.h"
 #include "lightmap/texel_raster.h"
@@ -1411,6 +1412,13 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   }
   std::vector<TexelLight> light;
   if (!lightStage(pages, texels, integrator, ls, showProgress, parallel, light, rays) ||
+      cancelled(cancel))
+    return Error{"cancelled"};
+  // Probe-lit objects: their own SH, from the same transport settings and tracer.
+  if (!bakeProbeLitObjects(result.scene, result.layout, **tracer,
+                           probeLitBakeSettings(settings.lightingMode, settings.bounces,
+                                                settings.albedoBoost, settings.indirectIntensity),
+                           settings.seed, showProgress, parallel, result.objectProbes, rays) ||
       cancelled(cancel))
     return Error{"cancelled"};
   result.stats.seconds =

@@ -17,6 +17,9 @@
 //      dilated into padding, seams stitched
 //      (postprocess.h, seams.h); ambient occlusion applied when aoAmount > 0; a last guard
 //      sets any negative texel left to 0 and counts it (stats.clampedTexels).
+// Besides the texels, after stage 5: every probe-lit object (too small for a lightmap,
+// AtlasObject::probeLit) gets its own L2 SH from probes around it (lightmap/probe_lit.h), so
+// that the outputs light it without a probe field.
 // Output files (EXR, manifest, glTF) are written by lightmap_writer.h, not here.
 #pragma once
 
@@ -27,6 +30,7 @@
 #include <vector>
 
 #include "lightmap/atlas.h"
+#include "probes/probe_baker.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/image.h"
 #include "src/light_modes.h"
@@ -190,6 +194,9 @@ struct LightmapBakeResult {
   std::vector<std::optional<UnwrapResult>> unwraps;
   AtlasLayout layout;
   std::vector<LightmapPageResult> pages;  // one per layout.pages entry
+  // Per Scene::objects entry: for a probe-lit object (layout.objects[i].probeLit) the light
+  // the bake gives it (lightmap/probe_lit.h); nullopt for every other object.
+  std::vector<std::optional<ObjectProbe>> objectProbes;
   // What each scene light contributed, and its shadowmask channel (settings.lightingMode).
   LightModePlan lightModes;
   std::vector<std::string> warnings;  // includes lightModes.warnings

@@ -134,6 +134,9 @@ Json lightmapSettingsJson(const LightmapBakeSettings& s, const LightmapOutputSet
   j["resolution"] = shortestDecimal(s.resolution);
   j["padding"] = s.padding;
   j["maxSize"] = s.maxSize;
+  // Which objects are too small for a lightmap (atlas.h): "auto" or a texel count.
+  j["minObjectTexels"] = s.minObjectTexels < 0.0f ? Json("auto")
+                                                  : Json(shortestDecimal(s.minObjectTexels));
   j["lockAtlas"] = o.lockAtlas.empty() ? Json(nullptr) : Json(o.lockAtlas);
   j["samplesPerTexel"] = s.samplesPerTexel;
   j["supersampling"] = s.supersampling;

@@ -1,6 +1,7 @@
 // manifest.cpp: kiln bake's manifest.json, its writer and its reader (see manifest.h).
 #include "lightmap/manifest.h"
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -173,6 +174,13 @@ Manifest bakeManifest(const LightmapBakeResult& result, const std::string& scene
     lights.push_back(e);
   }
   m.lights = std::move(lights);
+  bool withShadowmask = false;
+  for (int c : plan.shadowmaskChannel) withShadowmask |= c >= 0;
+  for (size_t i = 0; i < m.objects.size() && i < result.objectProbes.size(); ++i)
+    if (const std::optional<ObjectProbe>& probe = result.objectProbes[i]) {
+      m.objects[i].probeSh = probe->sh;
+      if (withShadowmask) m.objects[i].probeOcclusion = probe->occlusion;
+    }
   m.scene = std::filesystem::path(scenePath).filename().string();
   m.warnings = result.warnings;
   m.stats.texels = result.stats.texels;
@@ -209,6 +217,15 @@ Json manifestJson(const Manifest& m) {
                        {"scaleOffset", {so.x, so.y, so.z, so.w}},
                        {"unityScaleOffset", {uso.x, uso.y, uso.z, uso.w}}});
     if (o.probeLit) objects.back()["probeLit"] = true;
+    if (o.probeSh) {
+      Json sh = Json::array();
+      for (const vec3& c : o.probeSh->c) sh.insert(sh.end(), {c.x, c.y, c.z});
+      objects.back()["probeSH"] = std::move(sh);
+    }
+    if (o.probeOcclusion) {
+      const vec4 v = *o.probeOcclusion;
+      objects.back()["probeOcclusion"] = {v.x, v.y, v.z, v.w};
+    }
   }
   j["objects"] = std::move(objects);
   j["settings"] = m.settings;
@@ -330,6 +347,25 @@ Result<Manifest> readManifest(const Json& j, const std::string& where, ManifestU
       o.probeLit = e["probeLit"].get<bool>();
       if (o.probeLit && o.lightmapIndex >= 0)
         return fail(at + ".probeLit", "a probe-lit object has lightmapIndex -1");
+    }
+    if (e.contains("probeSH")) {
+      std::array<float, 3 * kShL2Count> v{};
+      if (!readFloats(e["probeSH"], v.data(), v.size()))
+        return fail(at + ".probeSH",
+                    "expected 27 finite numbers (9 radiance SH coefficients x R, G, B)");
+      if (!o.probeLit) return fail(at + ".probeSH", "only a probe-lit object has one");
+      ShL2Rgb sh;
+      for (int k = 0; k < kShL2Count; ++k)
+        sh.c[size_t(k)] = vec3(v[size_t(3 * k)], v[size_t(3 * k + 1)], v[size_t(3 * k + 2)]);
+      o.probeSh = sh;
+    }
+    if (e.contains("probeOcclusion")) {
+      vec4 v(1.0f);
+      if (!readFloats(e["probeOcclusion"], &v.x, 4) || glm::any(glm::lessThan(v, vec4(0.0f))) ||
+          glm::any(glm::greaterThan(v, vec4(1.0f))))
+        return fail(at + ".probeOcclusion", "expected 4 numbers in [0, 1]");
+      if (!o.probeLit) return fail(at + ".probeOcclusion", "only a probe-lit object has one");
+      o.probeOcclusion = v;
     }
     m.objects.push_back(std::move(o));
   }

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "kiln/result.h"
+#include "kiln/sh.h"
 #include "src/light_modes.h"
 #include "src/math.h"
 
@@ -52,6 +53,13 @@ struct ManifestObject {
   // (atlas.h, minObjectTexels): lit by probes instead, lightmapIndex -1. Written as
   // "probeLit": true, and only then.
   bool probeLit = false;
+  // A probe-lit object's own light (lightmap/probe_lit.h), written as "probeSH": 27 numbers,
+  // the 9 radiance SH coefficients of kiln's basis (MISSION.md) in order, each as R, G, B
+  // (three.js's SphericalHarmonics3.fromArray order); irradiance E(n) = probeIrradiance(sh, n).
+  std::optional<ShL2Rgb> probeSh{};
+  // Its shadowmask occlusion (4 channels in [0, 1]), written as "probeOcclusion" when some
+  // light has a shadowmask channel.
+  std::optional<vec4> probeOcclusion{};
 };
 
 // One scene light and what the bake's lighting mode did with it (docs/mixed_lighting.md).

@@ -347,6 +347,40 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   return set;
 }
 
+ObjectProbe bakeObjectProbe(const Integrator& integrator, const LightModePlan& plan,
+                            const Bounds3& bounds, uint64_t key,
+                            const ProbeBakeSettings& settings) {
+  const vec3 centre = 0.5f * (bounds.min + bounds.max), half = 0.5f * (bounds.max - bounds.min);
+  const float margin = 0.05f * glm::length(bounds.max - bounds.min) + 1e-3f;
+  ObjectProbe light;
+  light.occlusion = glm::vec4(0.0f);
+  float weights = 0.0f;
+  for (int k = 0; k < 7; ++k) {
+    if (k == 6 && weights > 0.0f) break;  // the centre only when no face point is valid
+    vec3 p = centre;
+    if (k < 6) p[k / 2] += (k % 2 ? 1.0f : -1.0f) * (half[k / 2] + margin);
+    const uint64_t probeKey = hashValues(key, uint64_t(k));
+    const ProbeSample sample =
+        bakeProbe(integrator, p, probeKey, settings.rays, settings.lightSamples);
+    // Valid as bakeProbes counts a probe: at most invalidBackfaceRatio of its rays on back faces.
+    const float w = k == 6                                                    ? 1.0f
+                    : sample.validity >= 1.0f - settings.invalidBackfaceRatio ? sample.validity
+                                                                              : 0.0f;
+    if (w <= 0.0f) continue;
+    light.sh += w * sample.sh;
+    light.occlusion +=
+        w * bakeProbeOcclusion(integrator, plan, p, probeKey, settings.occlusionSamples);
+    weights += w;
+  }
+  light.sh *= 1.0f / weights;
+  light.occlusion /= weights;
+  if (settings.dering) {
+    const DeringResult d = deringSh(light.sh);
+    if (d.changed) light.sh = d.sh;
+  }
+  return light;
+}
+
 int32_t deringProbeSh(std::span<ShL2Rgb> sh, int threads) {
   std::vector<char> changed(sh.size(), 0);
   ParallelOptions options;

@@ -167,6 +167,27 @@ float probeLightOcclusion(const Integrator& integrator, vec3 p, uint32_t light, 
 glm::vec4 bakeProbeOcclusion(const Integrator& integrator, const LightModePlan& plan, vec3 p,
                              uint64_t key, uint32_t samples);
 
+// Light of one object that probes light without a probe field: kiln bake's probe-lit objects
+// (too small for a lightmap, AtlasObject::probeLit; written to the manifest and the output
+// glTF) and kiln render's fallback for bakes that predate them. Unity samples one probe at a
+// renderer's bounds centre; a small prop's centre is often inside it (a cup's inside is dark)
+// or in its shadow, so this bakes a probe (bakeProbe, settings.rays and .lightSamples) just
+// outside the middle of each face of `bounds` (a margin of 5% of the diagonal + 1 mm) and
+// averages their radiance SH and occlusion (bakeProbeOcclusion, settings.occlusionSamples)
+// with their validity as weights, leaving out the probes bakeProbes counts invalid (more than
+// settings.invalidBackfaceRatio of their rays on back faces: under a floor, inside a wall);
+// when none is valid, the probe at the centre alone. The mean is deringed
+// (deringSh: irradiance >= 0 for every normal, as bakeProbes does). Probe k (0..5: -x, +x, -y,
+// +y, -z, +z; 6: the centre) draws its random numbers from hashValues(key, k). Thread-safe,
+// deterministic. `rays` (optional) receives the rays traced on the calling thread.
+struct ObjectProbe {
+  ShL2Rgb sh;                 // radiance SH, kiln's basis
+  glm::vec4 occlusion{1.0f};  // shadowmask channels (1 where no light has that channel)
+};
+ObjectProbe bakeObjectProbe(const Integrator& integrator, const LightModePlan& plan,
+                            const Bounds3& bounds, uint64_t key,
+                            const ProbeBakeSettings& settings);
+
 // Probe positions from JSON text {"positions": [[x, y, z], ...]}; `name` (the file) prefixes
 // messages, e.g. "probes.json: positions[3]: expected 3 finite numbers".
 Result<std::vector<vec3>> parseProbePositions(std::string_view json, std::string_view name);

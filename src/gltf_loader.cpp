@@ -1581,6 +1581,8 @@ class Loader {
     if (auto v = e.boolean("lppv")) settings->lppv = *v;
     if (auto v = e.boolean("castShadows")) settings->castShadows = *v;
     e.find("lightmap");  // kiln bake writes it into its output glTF; a bake of that repacks
+    e.find("probeSH");         // kiln bake writes them for probe-lit nodes (docs/
+    e.find("probeOcclusion");  // lightmap_outputs.md); a bake of that output bakes them again
     if (const Json* p = e.find("probes")) {
       if (!p->is_array()) fail(e.where("probes"), "must be an array of [x, y, z] positions");
       *hasProbes = true;

@@ -288,9 +288,12 @@ TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitUnderTheAutomaticRule
   AtlasSettings automatic;
   automatic.minObjectTexels = kAuto;
   const auto layout = packAtlas(scene, automatic);
-  // The default (0) gives every object a lightmap: the prop, without UVs, is an error here
-  // (the baker generates them first).
-  const auto all = packAtlas(scene, AtlasSettings{});
+  // The automatic rule is the default; with 0 every object gets a lightmap: the prop, without
+  // UVs, is an error here (the baker generates them first).
+  EXPECT_EQ(AtlasSettings{}.minObjectTexels, kAuto);
+  AtlasSettings every;
+  every.minObjectTexels = 0.0f;
+  const auto all = packAtlas(scene, every);
   ASSERT_FALSE(all.ok());
   EXPECT_NE(all.error().find("'prop'"), std::string::npos) << all.error();
   ASSERT_TRUE(layout.ok()) << layout.error();

@@ -34,6 +34,16 @@ export const scenes = [
     exposure: 1,
   },
   {
+    // The Cornell box with the short block's five faces and the tall block's top too small
+    // for a lightmap (--min-object-texels 150 at 60 texels per unit): three.js lights them
+    // from the probe light the bake wrote on their nodes (extras.kiln.probeSH), which
+    // compare_with_kiln_render.mjs compares with kiln render on their pixels alone.
+    name: 'cornell_box_probe_lit', scene: 'cornell_box.gltf', ldr: 'dldr',
+    bake: ['--preset', 'low', '--resolution', '60', '--min-object-texels', '150'],
+    from: [0.278, 0.273, -0.8], at: [0.278, 0.273, 0.2], fov: 39.3076481, size: [256, 256],
+    exposure: 0, probeLitInView: true,
+  },
+  {
     name: 'courtyard', scene: 'courtyard.gltf', ldr: 'dldr',
     bake: ['--preset', 'low'],
     from: [5.0, 11.0, -13.0], at: [4.669, 10.4207, -12.2552], fov: 60, size: [320, 180],
@@ -50,7 +60,10 @@ export const scenes = [
 // 2 on a few percent of the texels, which three.js then shows clamped) and with RGBM. The
 // views are the file's cameras CameraMain and, on the dLDR bake, CameraTableTop (the tea
 // set: chrome, metal and ceramic, the marble table top, the tiled floor) as look-from /
-// look-at / yfov, as for the shipped scenes. `views` are more cameras on the same bake.
+// look-at / yfov, as for the shipped scenes. `views` are more cameras on the same bake. With
+// the default --min-object-texels auto the tea cups, spoons, lamps and chair legs are lit by
+// their probe light at 16 texels per unit; the table-top view shows the cups (probeLitInView:
+// compare_with_kiln_render.mjs must compare their pixels).
 export function sharedScenes(sharedDir) {
   const breakfast = {
     path: join(sharedDir, 'scenes', 'breakfast_room', 'BreakfastRoom.gltf'),
@@ -61,7 +74,8 @@ export function sharedScenes(sharedDir) {
   };
   return [
     { ...breakfast, name: 'breakfast_room', ldr: 'dldr',
-      views: [{ name: 'table_top', from: [-0.9927, 0.8911, -1.2292], at: [-0.1105, 0.7814, -1.6871] }] },
+      views: [{ name: 'table_top', from: [-0.9927, 0.8911, -1.2292], at: [-0.1105, 0.7814, -1.6871],
+                probeLitInView: true }] },
     { ...breakfast, name: 'breakfast_room_rgbm', ldr: 'rgbm' },
   ];
 }

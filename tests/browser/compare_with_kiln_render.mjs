@@ -9,6 +9,12 @@
 //     pixels and channels is at most 2% of kiln render's mean;
 //   - linear radiance (kiln render --linear EXR against the browser's float render target):
 //     the same bound.
+// Where the output has probe-lit nodes (objects too small for a lightmap, lit by their
+// extras.kiln.probeSH), the viewer must light every one of their meshes, and where the camera
+// sees them (the viewer's probeLitMask, shrunk by a pixel so that silhouettes, where the two
+// rasterizations differ, are left out) their mean linear radiance in three.js must be within
+// PROBE_TOLERANCE of kiln render's: the whole-image bounds alone would let a small object
+// drawn black pass.
 // It prints both comparisons per scene and writes OUT/<scene>/{kiln,three,compare}.png
 // (compare = kiln render | three.js | |difference| x 4, display values). With --shared DIR
 // it compares the bakes of the shared folder's real scenes (bake_scenes.mjs --shared), and
@@ -26,6 +32,15 @@ import {
 } from './common.mjs';
 
 const TOLERANCE = 0.02;  // relative mean difference, both in display and linear values
+// Relative difference of the probe-lit pixels' mean linear radiance (three.js against kiln
+// render). Both evaluate the same SH for the same normals; what remains is rasterization
+// against ray casting at pixel centres and the half-float / 8-bit base colour textures.
+const PROBE_TOLERANCE = 0.03;
+// Fewer probe-lit pixels than this (after shrinking) are too few to compare: they are then
+// mostly the edges of thin, distant objects (the breakfast room's chair legs from its main
+// camera: 144 pixels, 2.1% apart), where three.js's mipmapped base colour textures and kiln
+// render's full-resolution bilinear lookups differ, not the probe light.
+const PROBE_MIN_PIXELS = 500;
 
 const args = parseArgs(process.argv.slice(2), ['kiln', 'bakes', 'out'],
                        'compare_with_kiln_render.mjs --kiln KILN --bakes DIR --out DIR [--shared DIR] [--chromium PATH]');
@@ -84,11 +99,13 @@ function expectedCounts(gltfPath) {
   // Meshes of lightmapped nodes: one three.js mesh per primitive of each node that the scene
   // holds (nodes are counted once per use in the scene's hierarchy).
   const scene = json.scenes[json.scene || 0];
-  let meshes = 0, lights = 0;
+  let meshes = 0, probeLit = 0, lights = 0;
   const visit = (n) => {
     const node = json.nodes[n];
     if (node.mesh !== undefined && node.extensions && node.extensions.MX_lightmap)
       meshes += json.meshes[node.mesh].primitives.length;
+    else if (node.mesh !== undefined && node.extras && node.extras.kiln && node.extras.kiln.probeSH)
+      probeLit += json.meshes[node.mesh].primitives.length;
     const light = node.extensions && node.extensions.KHR_lights_punctual;
     if (light) {
       const def = json.extensions.KHR_lights_punctual.lights[light.light];
@@ -97,7 +114,34 @@ function expectedCounts(gltfPath) {
     for (const c of node.children || []) visit(c);
   };
   for (const n of scene.nodes || []) visit(n);
-  return { meshes, lights };
+  return { meshes, probeLit, lights };
+}
+
+// The probe-lit pixels of a probeLitMask read-back (RGBA floats, row 0 at the top) whose 3 x 3
+// neighbourhood is probe-lit too.
+function probeLitPixels(mask, w, h) {
+  const inside = (x, y) => x >= 0 && y >= 0 && x < w && y < h && mask[4 * (y * w + x)] > 0.5;
+  const pixels = [];
+  for (let y = 0; y < h; ++y)
+    for (let x = 0; x < w; ++x) {
+      let all = true;
+      for (let dy = -1; dy <= 1 && all; ++dy)
+        for (let dx = -1; dx <= 1 && all; ++dx) all = inside(x + dx, y + dy);
+      if (all) pixels.push(y * w + x);
+    }
+  return pixels;
+}
+
+// Mean linear radiance (over RGB) of two images over `pixels`.
+function maskedMeans(a, b, pixels) {
+  let sumA = 0, sumB = 0;
+  for (const i of pixels)
+    for (let c = 0; c < 3; ++c) {
+      sumA += a.data[3 * i + c];
+      sumB += b.data[3 * i + c];
+    }
+  const n = 3 * Math.max(pixels.length, 1);
+  return { three: sumA / n, kiln: sumB / n };
 }
 
 const t0 = performance.now();
@@ -196,8 +240,9 @@ try {
             s += String.fromCharCode.apply(null, u8.subarray(i, i + 0x8000));
           return btoa(s);
         };
+        const mask = v.info.probeLitMeshes > 0 ? toBase64(new Uint8Array(v.probeLitMask().buffer)) : null;
         return { info: v.info, width, height, linear: toBase64(new Uint8Array(linear.buffer)),
-                 display: toBase64(bytes) };
+                 display: toBase64(bytes), mask };
       });
     } catch (e) {
       console.error(`FAILED: ${job.label}: the viewer failed: ${e.message}\n${messages.join('\n')}`);
@@ -215,10 +260,13 @@ try {
       failures++;
     }
     const expected = expectedCounts(job.file);
-    if (result.info.lightmappedMeshes !== expected.meshes || result.info.hiddenBakedLights !== expected.lights) {
-      console.error(`FAILED: ${job.label}: the viewer lightmapped ${result.info.lightmappedMeshes} meshes ` +
+    if (result.info.lightmappedMeshes !== expected.meshes || result.info.hiddenBakedLights !== expected.lights ||
+        result.info.probeLitMeshes !== expected.probeLit) {
+      console.error(`FAILED: ${job.label}: the viewer lightmapped ${result.info.lightmappedMeshes} meshes, ` +
+                    `lit ${result.info.probeLitMeshes} by their probe light ` +
                     `and hid ${result.info.hiddenBakedLights} baked lights; the file has ` +
-                    `${expected.meshes} lightmapped meshes and ${expected.lights} baked lights`);
+                    `${expected.meshes} lightmapped meshes, ${expected.probeLit} probe-lit meshes ` +
+                    `and ${expected.lights} baked lights`);
       failures++;
     }
     if (result.width !== w || result.height !== h) {
@@ -242,7 +290,23 @@ try {
     writePng(PNG, join(out, 'three.png'), threeDisplay);
     writePng(PNG, join(out, 'compare.png'), sideBySide(kilnDisplay, threeDisplay, display.diff));
 
-    const ok = display.relative <= TOLERANCE && linear.relative <= TOLERANCE;
+    let probe = null;
+    if (result.mask) {
+      const maskBytes = Buffer.from(result.mask, 'base64');
+      const pixels = probeLitPixels(new Float32Array(maskBytes.buffer, maskBytes.byteOffset, w * h * 4), w, h);
+      if (pixels.length >= PROBE_MIN_PIXELS) {
+        const m = maskedMeans(threeLinear, kilnLinear, pixels);
+        const relative = m.kiln > 0 ? Math.abs(m.three - m.kiln) / m.kiln : Infinity;
+        probe = { pixels: pixels.length, ...m, relative, ok: relative <= PROBE_TOLERANCE };
+      } else {
+        // A view made to show probe-lit objects (common.mjs: probeLitInView) must show them.
+        probe = { pixels: pixels.length, ok: job.probeLitInView ? false : undefined };
+      }
+    } else if (job.probeLitInView) {
+      probe = { pixels: 0, ok: false };
+    }
+    const ok = display.relative <= TOLERANCE && linear.relative <= TOLERANCE &&
+               (!probe || probe.ok !== false);
     if (!ok) failures++;
     rows.push({ job, display, linear, kilnSeconds, browserSeconds, ok });
     console.log(`${ok ? 'ok  ' : 'FAIL'} ${job.label} (${w} x ${h}, exposure ${job.exposure}): ` +
@@ -254,6 +318,13 @@ try {
     console.log(`     linear radiance:    mean three.js ${linear.meanA.toFixed(5)}, kiln render ` +
                 `${linear.meanB.toFixed(5)}, mean |diff| ${linear.meanAbs.toFixed(5)} = ` +
                 `${(100 * linear.relative).toFixed(3)}% of kiln render's mean (limit ${100 * TOLERANCE}%)`);
+    if (probe && probe.relative !== undefined)
+      console.log(`     probe-lit objects:  ${probe.pixels} pixels, mean three.js ${probe.three.toFixed(5)}, ` +
+                  `kiln render ${probe.kiln.toFixed(5)}, difference ${(100 * probe.relative).toFixed(3)}% ` +
+                  `(limit ${100 * PROBE_TOLERANCE}%)`);
+    else if (probe)
+      console.log(`     probe-lit objects:  ${probe.pixels} pixels in view, too few to compare` +
+                  (probe.ok === false ? ' (FAIL: this view is made to show them)' : ''));
     console.log(`     images: ${join(out, 'compare.png')} (kiln render | three.js | |diff| x 4)`);
   }
 

@@ -16,6 +16,8 @@
 //     is LINEAR / LINEAR (no mipmaps) / CLAMP_TO_EDGE, and extras.kiln.page is the node's
 //     lightmapIndex;
 //   - every node the manifest lightmaps has the extension, and no other node has it;
+//   - every node the manifest marks probeLit has extras.kiln.probeSH, the manifest's 27
+//     numbers, and no other node has one;
 //   - KHR_lights_punctual lights: extras.kiln.baked is true exactly for the lights whose
 //     direct light the bake holds (manifest lights[].bakedDirect).
 //
@@ -60,6 +62,14 @@ function checkLightmaps(file, json, manifest, atlasUv) {
     const ext = node.extensions && node.extensions.MX_lightmap;
     const object = byNode.get(n);
     const lightmapped = object && object.lightmapIndex >= 0;
+    const sh = node.extras && node.extras.kiln && node.extras.kiln.probeSH;
+    if (object && object.probeLit) {
+      if (JSON.stringify(sh) !== JSON.stringify(object.probeSH) || !Array.isArray(sh) || sh.length !== 27)
+        failures.push(where(`nodes[${n}] ("${node.name}").extras.kiln.probeSH: ${JSON.stringify(sh)}, ` +
+                            `the manifest's probeSH is ${JSON.stringify(object.probeSH)}`));
+    } else if (sh !== undefined) {
+      failures.push(where(`nodes[${n}] ("${node.name}").extras.kiln.probeSH: the manifest does not mark the node probeLit`));
+    }
     if (!ext) {
       if (lightmapped) failures.push(where(`nodes[${n}] ("${node.name}"): the manifest gives it lightmap ${object.lightmapIndex} but it has no MX_lightmap`));
       return;

@@ -46,7 +46,7 @@ int main(int argc, char** argv) {
   using namespace kiln;
   if (argc < 3) {
     std::fprintf(stderr, "usage: %s SCENE RESOLUTION [--padding P] [--max-size S] "
-                         "[--min-object-texels N] [--png PREFIX]\n", argv[0]);
+                         "[--min-object-texels N|auto] [--png PREFIX]\n", argv[0]);
     return 2;
   }
   LightmapBakeSettings bake;
@@ -57,7 +57,8 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[a], "--padding")) bake.padding = std::atoi(argv[a + 1]);
     else if (!std::strcmp(argv[a], "--max-size")) bake.maxSize = std::atoi(argv[a + 1]);
     else if (!std::strcmp(argv[a], "--min-object-texels"))
-      bake.minObjectTexels = std::strtof(argv[a + 1], nullptr);
+      bake.minObjectTexels =
+          std::strcmp(argv[a + 1], "auto") ? std::strtof(argv[a + 1], nullptr) : -1.0f;
     else if (!std::strcmp(argv[a], "--png")) png = argv[a + 1];
     else if (!std::strcmp(argv[a], "--zoom")) zoom = std::max(1, std::atoi(argv[a + 1]));
     else {

@@ -365,9 +365,9 @@ void registerBakeCommand(CLI::App& app) {
       ->check(CLI::Range(1, 16384));
   b->add_option("--min-object-texels", o->minObjectTexels,
                 "Objects whose surface would get fewer lightmap texels are lit by probes "
-                "instead, listed in a warning and the manifest (default 0 = never; \"auto\": "
-                "objects without TEXCOORD_1 under 5 x --resolution texels and 1% of the "
-                "lightmapped area)")
+                "instead (their own probe light in the manifest and output glTF), listed in a "
+                "warning and the manifest (default \"auto\": objects without TEXCOORD_1 under "
+                "5 x --resolution texels and 1% of the lightmapped area; 0 = never)")
       ->check([](const std::string& v) -> std::string {
         if (v == "auto") return "";
         char* end = nullptr;

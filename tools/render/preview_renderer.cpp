@@ -18,6 +18,7 @@
 #include "kiln/probe_runtime.h"
 #include "lightmap/directional.h"
 #include "lightmap/manifest.h"
+#include "lightmap/probe_lit.h"
 #include "lightmap/seams.h"
 #include "probes/lppv.h"
 #include "probes/probe_baker.h"
@@ -213,6 +214,8 @@ Result<LightmapSet> loadLightmapSet(const std::string& dir, const Scene& scene) 
     PreviewLightmapObject& entry = set.objects[o];
     entry.lightmapIndex = e.lightmapIndex;
     entry.probeLit = e.probeLit;
+    entry.probeSh = e.probeSh;
+    entry.probeOcclusion = e.probeOcclusion;
     if (entry.lightmapIndex < 0) continue;
     entry.scaleOffset = uv1IsAtlasUv ? vec4(1.0f, 1.0f, 0.0f, 0.0f) : e.scaleOffset;
     if (object.uv1.empty())
@@ -491,39 +494,26 @@ class Renderer {
   }
 
  private:
-  // Probe light for an object the bake left to probes, without a probe file: probes baked
-  // as `kiln probes bake` bakes them (the lightmaps' lighting mode and transport settings)
-  // just outside the middle of each face of its bounds (its centre may be inside it: a cup's
-  // inside is dark), averaged with their validity as weights so that points inside other
-  // geometry (under a table top) count little; the centre when none is valid.
+  // Probe light for an object the bake left to probes, without a probe file: the light the
+  // bake gave it (manifest "probeSH"), or for a bake that has none, bakeObjectProbe's probes
+  // around its bounds baked as kiln bake bakes them (the lightmaps' lighting mode and
+  // transport settings; this tracer also holds the dynamic objects).
   ObjectProbeLight probeLightAround(const LightmapSet& lm, const Bounds3& b, size_t object) const {
-    ProbeBakeSettings ps;
-    ps.lightingMode = lm.lightingMode;
-    ps.bounces = lm.bounces;
-    ps.albedoBoost = lm.albedoBoost;
-    ps.indirectIntensity = lm.indirectIntensity;
-    const Integrator integrator(scene_, *tracer_, probeIntegratorSettings(scene_, ps));
-    const LightModePlan plan = probeLightModePlan(scene_, ps);
-    const vec3 centre = 0.5f * (b.min + b.max), half = 0.5f * (b.max - b.min);
-    const float margin = 0.05f * glm::length(b.max - b.min) + 1e-3f;
+    const PreviewLightmapObject& entry = lm.objects[object];
     ObjectProbeLight light;
     light.available = true;
-    light.occlusion = glm::vec4(0.0f);
-    float weights = 0.0f;
-    for (int k = 0; k < 7; ++k) {
-      vec3 p = centre;
-      if (k < 6) p[k / 2] += (k % 2 ? 1.0f : -1.0f) * (half[k / 2] + margin);
-      if (k == 6 && weights > 0.0f) break;  // the centre only when no face point is valid
-      const uint64_t key = hashValues(settings_.seed, uint64_t(object), uint64_t(k));
-      const ProbeSample sample = bakeProbe(integrator, p, key, ps.rays, ps.lightSamples);
-      const float w = k == 6 ? 1.0f : sample.validity > 0.5f ? sample.validity : 0.0f;
-      if (w <= 0.0f) continue;
-      light.sh += w * sample.sh;
-      light.occlusion += w * bakeProbeOcclusion(integrator, plan, p, key, ps.occlusionSamples);
-      weights += w;
+    if (entry.probeSh) {
+      light.sh = *entry.probeSh;
+      light.occlusion = entry.probeOcclusion.value_or(glm::vec4(1.0f));
+      return light;
     }
-    light.sh *= 1.0f / weights;
-    light.occlusion /= weights;
+    const ProbeBakeSettings ps =
+        probeLitBakeSettings(lm.lightingMode, lm.bounces, lm.albedoBoost, lm.indirectIntensity);
+    const Integrator integrator(scene_, *tracer_, probeIntegratorSettings(scene_, ps));
+    const ObjectProbe probe = bakeObjectProbe(integrator, probeLightModePlan(scene_, ps), b,
+                                              hashValues(settings_.seed, uint64_t(object)), ps);
+    light.sh = probe.sh;
+    light.occlusion = probe.occlusion;
     return light;
   }
 
@@ -543,8 +533,8 @@ class Renderer {
       Bounds3 b;
       for (vec3 p : object.positions) b.extend(p);
       if (!in_.probes && lm.objects[o].probeLit && !b.empty()) {
-        // Too small for a lightmap (kiln bake --min-object-texels): probes baked
-        // around it, so that a preview without a probe file does not draw it black.
+        // Too small for a lightmap (kiln bake --min-object-texels): the light the bake
+        // gave it, so that a preview without a probe file does not draw it black.
         objectProbes_[o] = probeLightAround(lm, b, o);
         continue;
       }

@@ -43,6 +43,7 @@
 #include <vector>
 
 #include "kiln/probe_set.h"
+#include "kiln/sh.h"
 #include "src/image.h"
 #include "src/light_modes.h"
 #include "src/math.h"
@@ -90,8 +91,12 @@ struct PreviewLightmapObject {
   int lightmapIndex = -1;                    // page, or -1: no lightmap
   vec4 scaleOffset{1.0f, 1.0f, 0.0f, 0.0f};  // atlasUV = uv1 * xy + zw
   // Lightmapped by its settings but too small for a lightmap (manifest "probeLit"): lit by
-  // probes, and without --probes by one probe the preview bakes at its centre.
+  // probes; without --probes by the light the bake gave it (manifest "probeSH",
+  // "probeOcclusion"), or for a bake without it by bakeObjectProbe (probes/probe_baker.h) run
+  // by the preview.
   bool probeLit = false;
+  std::optional<ShL2Rgb> probeSh;     // radiance SH
+  std::optional<vec4> probeOcclusion;  // shadowmask channels
 };
 
 // What the bake did with one scene light.

@@ -41,9 +41,17 @@
 //     its light is already in the lightmaps (option `hideBakedLights`, default true).
 //     Lights the bake left to run time (mixed lights under baked-indirect and shadowmask)
 //     stay on.
+// Per probe-lit node (an object too small for a lightmap, which `kiln bake` lights with its own
+// probe light instead: extras.kiln.probeSH, 27 numbers, the 9 L2 radiance SH coefficients of
+// kiln's basis, each R, G, B; docs/lightmap_outputs.md) it clones the node's materials and
+// adds the irradiance E = shGetIrradianceAt(world normal, SH) (three.js's L2 irradiance, the
+// same convolution as kiln's probeIrradiance), clamped at 0, as kiln render does: with
+// `kilnShading`, outgoing radiance += base colour x E / pi; without it, E goes into three.js's
+// own indirect irradiance. The SH is a per-material uniform (kilnProbeSH), so every probe-lit
+// material shares one shader program. mesh.userData.kilnProbeSH holds the SH.
 // Errors in the extension (a missing texture, an unknown encoding, a node without the UV set)
-// are reported with console.warn naming the node and the field; that node keeps its material
-// and the rest of the file loads.
+// or in extras.kiln.probeSH are reported with console.warn naming the node and the field; that
+// node keeps its material and the rest of the file loads.
 import {
   ConstantColorFactor,
   CustomBlending,
@@ -53,6 +61,7 @@ import {
   SRGBColorSpace,
   ShaderChunk,
   SrcAlphaFactor,
+  Vector3,
 } from 'three';
 
 export const EXTENSION_NAME = 'MX_lightmap';
@@ -139,6 +148,50 @@ function patchMaterial(material, encoding, range, kilnShading) {
   return null;
 }
 
+// Validates a node's extras.kiln.probeSH; returns 9 Vector3 (radiance SH, kiln's basis) or a
+// string that says what is wrong.
+export function readProbeSh(value) {
+  if (!finiteArray(value, 27)) return 'expected 27 finite numbers (9 SH coefficients x R, G, B)';
+  const sh = [];
+  for (let i = 0; i < 9; ++i) sh.push(new Vector3(value[3 * i], value[3 * i + 1], value[3 * i + 2]));
+  return sh;
+}
+
+// The probe light's term, after three.js's lights_fragment_maps: the irradiance for the
+// unperturbed normal (kiln's preview shades with the interpolated vertex normal) in world
+// axes, kiln's probeIrradiance convention (shGetIrradianceAt's constants are pi x Y_00,
+// 2 pi / 3 x Y_1m and pi / 4 x Y_2m, kiln's convolution of radiance SH).
+function probeTerm(kilnShading) {
+  const add = kilnShading
+    ? 'reflectedLight.indirectDiffuse += kilnProbeIrradiance * BRDF_Lambert( diffuseColor.rgb );'
+    : 'irradiance += kilnProbeIrradiance;';
+  return `
+#if defined( RE_IndirectDiffuse )
+	vec3 kilnProbeIrradiance = max( shGetIrradianceAt( normalize( inverseTransformDirection( nonPerturbedNormal, viewMatrix ) ), kilnProbeSH ), vec3( 0.0 ) );
+	${add}
+#endif
+`;
+}
+
+// Sets the probe light's shader patch on a (cloned) material. Returns an error message, or null.
+function patchProbeMaterial(material, sh, kilnShading) {
+  if (!material.isMeshStandardMaterial && !material.isMeshLambertMaterial &&
+      !material.isMeshPhongMaterial)
+    return `an unlit ${material.type} takes no probe light`;
+  const previous = material.onBeforeCompile;
+  material.onBeforeCompile = (shader, renderer) => {
+    if (previous) previous.call(material, shader, renderer);
+    shader.uniforms.kilnProbeSH = { value: sh };
+    shader.fragmentShader = shader.fragmentShader
+        .replace('#include <lights_pars_begin>', '#include <lights_pars_begin>\nuniform vec3 kilnProbeSH[ 9 ];')
+        .replace('#include <lights_fragment_maps>', '#include <lights_fragment_maps>\n' + probeTerm(kilnShading));
+  };
+  const key = `kiln-probe:${kilnShading}`;
+  const previousKey = material.customProgramCacheKey.bind(material);
+  material.customProgramCacheKey = () => previousKey() + key;
+  return null;
+}
+
 export class KilnLightmapPlugin {
   constructor(parser, options = {}) {
     this.parser = parser;
@@ -162,8 +215,12 @@ export class KilnLightmapPlugin {
   createNodeMesh(nodeIndex) {
     const json = this.parser.json;
     const nodeDef = json.nodes[nodeIndex];
-    if (!nodeDef.extensions || !nodeDef.extensions[EXTENSION_NAME] || nodeDef.mesh === undefined)
-      return null;
+    if (nodeDef.mesh === undefined) return null;
+    if (!nodeDef.extensions || !nodeDef.extensions[EXTENSION_NAME]) {
+      const kiln = nodeDef.extras && nodeDef.extras.kiln;
+      if (!kiln || kiln.probeSH === undefined) return null;
+      return this._probeLit(nodeIndex);
+    }
     // Another plugin's mesh (GPU instancing) if it has one for this node, else the parser's.
     const instancing = this.parser.plugins.EXT_mesh_gpu_instancing;
     const meshPromise = (instancing && instancing.createNodeMesh(nodeIndex)) ||
@@ -182,6 +239,45 @@ export class KilnLightmapPlugin {
       this._warn(nodeIndex, `lightMapTexture: texture ${spec.texture} did not load (${error})`);
       return meshPromise;
     });
+  }
+
+  // A probe-lit node: its materials lit by its extras.kiln.probeSH.
+  _probeLit(nodeIndex) {
+    const instancing = this.parser.plugins.EXT_mesh_gpu_instancing;
+    const meshPromise = (instancing && instancing.createNodeMesh(nodeIndex)) ||
+                        this.parser.createNodeMesh(nodeIndex);
+    const sh = readProbeSh(this.parser.json.nodes[nodeIndex].extras.kiln.probeSH);
+    if (typeof sh === 'string') {
+      this._warnProbe(nodeIndex, sh);
+      return meshPromise;
+    }
+    return Promise.resolve(meshPromise).then((object) => {
+      const meshes = [];
+      object.traverse((o) => { if (o.isMesh) meshes.push(o); });
+      const { kilnShading } = this.options;
+      for (const mesh of meshes) {
+        const lit = (material) => {
+          const m = material.clone();
+          const error = patchProbeMaterial(m, sh, kilnShading);
+          if (error) {
+            this._warnProbe(nodeIndex, error);
+            return material;
+          }
+          m.needsUpdate = true;
+          return m;
+        };
+        mesh.material = Array.isArray(mesh.material) ? mesh.material.map(lit) : lit(mesh.material);
+        mesh.userData.kilnProbeSH = sh.map((v) => v.toArray());
+      }
+      return object;
+    });
+  }
+
+  _warnProbe(nodeIndex, message) {
+    const node = this.parser.json.nodes[nodeIndex];
+    const name = node && node.name !== undefined ? ` ("${node.name}")` : '';
+    console.warn(`KilnLightmapPlugin: nodes[${nodeIndex}]${name}.extras.kiln.probeSH: ${message}` +
+                 '; the node is shown without its probe light');
   }
 
   _apply(nodeIndex, object, page, spec) {
