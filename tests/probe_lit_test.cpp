@@ -134,13 +134,13 @@ TEST(ProbeLit, ManifestRoundTripAndErrors) {
     void (*mutate)(Json&);
     const char* error;
   } cases[] = {
-      {[](Json& j) { j["objects"][1]["probeSH"].erase(26); },
+      {[](Json& doc) { doc["objects"][1]["probeSH"].erase(26); },
        "objects[1].probeSH: expected 27 finite numbers"},
-      {[](Json& j) { j["objects"][1]["probeSH"][4] = "x"; },
+      {[](Json& doc) { doc["objects"][1]["probeSH"][4] = "x"; },
        "objects[1].probeSH: expected 27 finite numbers"},
-      {[](Json& j) { j["objects"][0]["probeSH"] = j["objects"][1]["probeSH"]; },
+      {[](Json& doc) { doc["objects"][0]["probeSH"] = doc["objects"][1]["probeSH"]; },
        "objects[0].probeSH: only a probe-lit object has one"},
-      {[](Json& j) { j["objects"][1]["probeOcclusion"][1] = 1.5; },
+      {[](Json& doc) { doc["objects"][1]["probeOcclusion"][1] = 1.5; },
        "objects[1].probeOcclusion: expected 4 numbers in [0, 1]"},
   };
   for (const auto& c : cases) {

@@ -46,7 +46,10 @@ LightmapSet constantLightmaps(const Scene& scene, vec3 value, vec4 scaleOffset) 
     for (int x = 0; x < 8; ++x)
       for (int c = 0; c < 3; ++c) page.light.at(x, y)[c] = value[c];
   set.pages.push_back(page);
-  set.objects.assign(scene.objects.size(), PreviewLightmapObject{0, scaleOffset});
+  PreviewLightmapObject lit;
+  lit.lightmapIndex = 0;
+  lit.scaleOffset = scaleOffset;
+  set.objects.assign(scene.objects.size(), lit);
   set.lights.resize(scene.lights.size());
   return set;
 }
