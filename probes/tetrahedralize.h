@@ -29,14 +29,15 @@ namespace kiln {
 enum class DelaunayBackend { TetGen, Cgal };
 
 struct ProbeTopologySettings {
-  // CGAL by default: faster, and the same cells as TetGen in general position (another
-  // valid split of cospherical probes, e.g. grids). Its split of two_rooms_thin's scene probes
-  // once failed chart_test's thin-wall leak ratio (0.22 of the bound, TetGen's 3e-15): a cell
-  // paired a point behind the wall with a probe whose map footprint mixed wall and doorway
-  // texels, which any split can hit; the visibility test's silhouette cut now hides such
-  // points (docs/probes.md, "Delaunay backends"). TetGen stays selectable; it is AGPLv3 and
-  // only ever linked into the bake tools, never kiln_runtime.
-  DelaunayBackend backend = DelaunayBackend::Cgal;
+  // TetGen by default. CGAL is faster and gives the same cells in general position, but
+  // another valid split of cospherical probes (grids); the wall tests pass with both,
+  // chart_test's thin-wall leak ratio (< 0.1 of the bound) not with CGAL's split of
+  // two_rooms_thin's scene probes (0.22; TetGen's 3e-15). The cause is the visibility test at
+  // a silhouette (a cell pairs a point behind the wall with a probe whose map footprint mixes
+  // wall and doorway texels; gone at 48 x 48 maps), which any split can hit: docs/probes.md,
+  // "Delaunay backends". TetGen is AGPLv3 and only ever linked into the bake tools, never
+  // kiln_runtime.
+  DelaunayBackend backend = DelaunayBackend::TetGen;
   // Probes closer than this fraction of the bounds diagonal are merged.
   double mergeTolerance = 1e-6;
   // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).

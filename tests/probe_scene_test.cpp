@@ -553,10 +553,7 @@ TEST(ProbeScenes, DarkRoomBehindTheSunlitWallGetsNoSunThroughIt) {
 // full: 1 / minSigma is 50 per metre from the distance alone, and where far jumps between
 // neighbouring texels (a silhouette: a doorway's edge with the room behind it, metres deeper)
 // D G Dfar multiplies it by tens to hundreds, so a point crossing the edge of what a probe
-// sees goes from seen to hidden within millimetres; that is the cut-off doing its job. Where
-// the silhouette cut binds (a_k = 1 - cut < the reach ramp), cut is a product of two texels'
-// shares min(32 x bilinear weight, 1), each changing by at most 32 G |dp|, and a ramp in d
-// (|dd| / w), so |da_k| <= (64 G + 1 / minSigma) |dp|. The
+// sees goes from seen to hidden within millimetres; that is the cut-off doing its job. The
 // term is written (b_k c_k / U) |da_k|, which is w_k |d ln a_k| without the division by a_k:
 // d ln a_k is unbounded as a_k falls to 1e-12, but probe k's share of U falls with a_k as
 // fast, so the term is large only where a probe that the Chebyshev test lets through (c_k
@@ -612,7 +609,6 @@ SlopeBound blendSlopeBound(const ProbeSet& set, vec3 p) {
     const std::span<const uint16_t> m = vis.probe(int32_t(i));
     float mu = 0.0f, sigma = 0.0f, far = 0.0f;
     float muLo = 1.0f, muHi = 0.0f, sLo = 1.0f, sHi = 0.0f, farLo = 1.0f, farHi = 0.0f;
-    float texelReach[4], texelFar[4], share[4];
     for (int t = 0; t < 4; ++t) {
       const uint16_t* texel = &m[kValues * size_t(fp.texel[t])];
       const float a = float(texel[0]) * kUnorm, b = float(texel[1]) * kUnorm;
@@ -621,34 +617,15 @@ SlopeBound blendSlopeBound(const ProbeSet& set, vec3 p) {
       muLo = std::min(muLo, a), muHi = std::max(muHi, a);
       sLo = std::min(sLo, b), sHi = std::max(sHi, b);
       farLo = std::min(farLo, z), farHi = std::max(farHi, z);
-      texelReach[t] = a + b, texelFar[t] = z, share[t] = std::min(32.0f * fp.weight[t], 1.0f);
     }
     const float w = blend.minSigma / dMax;
     const float g = 1.145f * float(vis.resolution) / r;
     const float sd = std::max(sigma, w);
     const float s2 = sd * sd;
     const float ramp = 1.0f - (d - far) / w;
-    // The silhouette cut (kiln/probe_visibility.h): texel t ended every ray short of the point
-    // while texel u reaches beyond 1.5 far_t, each counted by min(32 x its bilinear weight, 1).
-    float cut = 0.0f;
-    for (int t = 0; t < 4; ++t) {
-      float gap = 0.0f;
-      for (int u = 0; u < 4; ++u)
-        gap = std::max(gap, share[u] * std::clamp((texelReach[u] - 1.5f * texelFar[t]) / w,
-                                                  0.0f, 1.0f));
-      cut = std::max(cut, share[t] * gap * std::clamp((d - texelFar[t]) / w, 0.0f, 1.0f));
-    }
-    const float reach = std::clamp(ramp, 1e-12f, 1.0f);
-    f[k].reach = std::max(std::min(reach, 1.0f - cut), 1e-12f);
-    if (1.0f - cut < reach) {
-      // The cut binds: its slope is at most that of the two shares (a bilinear weight changes
-      // by at most g per metre, times 32) plus that of the behind ramp (1 / minSigma).
-      f[k].onRamp = cut > 0.0f && cut < 1.0f - 1e-12f;
-      f[k].reachSlope = 2.0f * 32.0f * g + 1.0f / blend.minSigma;
-    } else {
-      f[k].onRamp = ramp > 1e-12f && ramp < 1.0f;
-      f[k].reachSlope = (1.0f + dMax * g * (farHi - farLo)) / blend.minSigma;
-    }
+    f[k].reach = std::clamp(ramp, 1e-12f, 1.0f);
+    f[k].onRamp = ramp > 1e-12f && ramp < 1.0f;
+    f[k].reachSlope = (1.0f + dMax * g * (farHi - farLo)) / blend.minSigma;
     if (d > mu) {
       const float e = d - mu;
       const float chebyshev = s2 / (s2 + e * e);

@@ -168,7 +168,7 @@ Result<ChartTable> tetrahedralizationChart(const ChartOptions& o) {
                     "inexact constructions): the Delaunay step plus kiln's shared work (merge "
                     "check, canonical cell order, neighbours, outer cells, seed grid), one thread");
   t.notes.push_back("timing: median of 5 runs (3 at >10k probes; 3 with --quick), TetGen and CGAL "
-                    "runs interleaved; baseline: TetGen (kiln's default is CGAL); inner_cells of "
+                    "runs interleaved; baseline: TetGen, kiln's default backend; inner_cells of "
                     "the two must agree (the Delaunay tetrahedralization of points in general "
                     "position is unique)");
   t.plot =

@@ -59,7 +59,7 @@ struct BakeOptions {
   std::string out;
   int rays = 16384;
   uint64_t seed = 0;
-  std::string backend = "cgal";
+  std::string backend = "tetgen";
   int bounces = -1;          // -1 = the scene's extras.kiln.bounces, else kDefaultProbeBounces
   std::string lightingMode;  // empty = the scene's extras.kiln.lightingMode, else baked-indirect
   int threads = 0;

@@ -37,11 +37,6 @@ constexpr float kUnorm16 = 1.0f / 65535.0f;
 // above 0 and, with minVisibleWeight 0 (full renormalization), a cell whose probes are all
 // hidden still weights them by how hidden each is.
 constexpr float kHiddenReach = 1e-12f;
-// Silhouette cut (probeVisibility): a texel counts fully from this bilinear weight's inverse
-// up (weight 1/4), and a neighbour's centre depth beyond (1 + kSilhouetteGap) x a texel's
-// farthest ray is a depth edge.
-constexpr float kSilhouetteShare = 32.0f;
-constexpr float kSilhouetteGap = 0.5f;
 
 // octahedralFootprint, inline so that probeVisibility (four calls per lookup) keeps the texels
 // in registers.
@@ -122,50 +117,20 @@ float probeVisibility(std::span<const uint16_t> moments, int32_t r, float maxDis
   // and window in one texel: a large sigma) does not widen its neighbours' test by its
   // weight x sigma^2 where its weight is small.
   float mean = 0.0f, sigma = 0.0f, far = 0.0f;
-  float texelReach[4], texelFar[4], share[4];
   for (int k = 0; k < 4; ++k) {
     const uint16_t* texel = &moments[3 * size_t(f.texel[k])];
-    texelReach[k] = float(texel[0]) + float(texel[1]);
-    texelFar[k] = float(texel[2]);
     mean += f.weight[k] * float(texel[0]);
     sigma += f.weight[k] * float(texel[1]);
-    far += f.weight[k] * texelFar[k];
-    share[k] = std::min(f.weight[k] * kSilhouetteShare, 1.0f);
+    far += f.weight[k] * float(texel[2]);
   }
   mean *= kUnorm16;
   far *= kUnorm16;
   // A zero minSigma (allowed from C++) would make the far ramp a 0/0 at d = far.
   const float minSigma = std::max(s.minSigma, 1e-6f) * inverseD;
-  const float inverseRamp = 1.0f / minSigma;
   // Beyond the farthest any of the texels' rays went, every ray stopped short of the point:
   // hidden, whatever a wide (e.g. two-surface) distribution lets Chebyshev's bound say. The
   // cut is a ramp minSigma wide, so v stays continuous in d.
-  float reach = std::clamp(1.0f - (d - far) / minSigma, kHiddenReach, 1.0f);
-  // Silhouettes: a texel k whose every ray stopped short of the point (d beyond far_k) next
-  // to a texel j whose depth reaches well beyond that (mu_j + sigma_j > (1 + kSilhouetteGap)
-  // far_k: a depth edge, not a tilted surface whose next texel continues its depth; sigma_j
-  // counts because a texel holding the edge itself has a mean near the wall's depth and a
-  // large spread) hides the point, weighted by both texels' shares of
-  // the footprint (1 from a bilinear weight of 1 / kSilhouetteShare up, 0 at weight 0, so the
-  // cut is continuous where a texel enters the footprint). Interpolating across the edge
-  // would let the far side's depth pass a point that lies behind the near side's surface.
-  float cut = 0.0f;
-  const float dUnorm = d * 65535.0f, rampUnorm = inverseRamp * kUnorm16;
-  // A point short of every texel's farthest ray (most visible points) has nothing to cut.
-  const float nearestFar =
-      std::min(std::min(texelFar[0], texelFar[1]), std::min(texelFar[2], texelFar[3]));
-  if (dUnorm > nearestFar) {
-    for (int k = 0; k < 4; ++k) {
-      const float edge = (1.0f + kSilhouetteGap) * texelFar[k];
-      float gap = 0.0f;
-      for (int j = 0; j < 4; ++j)
-        gap = std::max(gap,
-                       share[j] * std::clamp((texelReach[j] - edge) * rampUnorm, 0.0f, 1.0f));
-      const float behind = std::clamp((dUnorm - texelFar[k]) * rampUnorm, 0.0f, 1.0f);
-      cut = std::max(cut, share[k] * gap * behind);
-    }
-  }
-  reach = std::max(std::min(reach, 1.0f - cut), kHiddenReach);
+  const float reach = std::clamp(1.0f - (d - far) / minSigma, kHiddenReach, 1.0f);
   if (d <= mean) return std::max(reach, kVisibilityFloor);
   sigma = std::max(sigma * kUnorm16, minSigma);
   const float variance = sigma * sigma;

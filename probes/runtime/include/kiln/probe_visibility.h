@@ -11,8 +11,7 @@
 // depth edges and noise, not the tilt. At run time the weight of probe k for a point p is its
 // barycentric weight times
 //
-//   v_k(p) = max(c(d) * max(min(clamp(1 - (d - far) / w, 1e-12, 1), 1 - cut), 1e-12),
-//                kVisibilityFloor),
+//   v_k(p) = max(c(d) * clamp(1 - (d - far) / w, 1e-12, 1), kVisibilityFloor),
 //   c(d)   = 1                                           if d <= mu
 //          = (s2 / (s2 + (d - mu)^2))^3                  otherwise,    w = minSigma / D,
 //
@@ -24,19 +23,12 @@
 // shadow maps; DDGI, Majercik et al. 2019, cubes it to sharpen the cut-off); the second factor
 // hides a point beyond the farthest depth the texels' rays reached, which a texel holding two
 // surfaces (a probe next to a wall looking along it) would otherwise let through with a loose
-// bound. cut hides a point behind a silhouette, where bilinear interpolation across a depth
-// edge would let the far side's depth pass it: cut = max over texels t, u of the footprint of
-// share(a_t) share(a_u) ramp(mu_u + sigma_u - 1.5 far_t) ramp(d - far_t), with a the bilinear
-// weights, share(a) = min(32 a, 1) and ramp(x) = clamp(x / w, 0, 1): texel t ended every ray
-// short of the point and texel u reaches well beyond t's surface (a depth edge, not a tilted
-// surface whose neighbouring texels continue its depth). Conservative within about a texel of
-// the edge (docs/probes.md, "What the runtime does"). The weights b_k v_k are divided by
-// max(sum_j b_j v_j, minVisibleWeight): they sum to 1 where the cell's probes see the point
-// with at least that share of the barycentric weight, and fade towards 0 (black) at a point
-// that none of them sees. v never reaches 0, so the blend is always defined, and it is
-// continuous in p (the map is sampled with octahedral wrapping, the test is continuous in d,
-// mu, sigma, far and the bilinear weights, and a face shared by two cells has the same three
-// probes with the same weights on both sides).
+// bound. The weights b_k v_k are divided by max(sum_j b_j v_j, minVisibleWeight): they sum to
+// 1 where the cell's probes see the point with at least that share of the barycentric weight,
+// and fade towards 0 (black) at a point that none of them sees. v never reaches 0, so the
+// blend is always defined, and it is continuous in p (the map is sampled with octahedral
+// wrapping, the test is continuous in d, mu, sigma and far, and a face shared by two cells has
+// the same three probes with the same weights on both sides).
 //
 // Only GLM: this is part of kiln_runtime.
 #pragma once
