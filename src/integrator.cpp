@@ -377,6 +377,32 @@ vec3 Integrator::albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const {
 // hit by this ray is MIS-weighted); bsdfPdf = 0 counts it fully.
 // `backFaceHits`, when given, counts a first hit on the back of a single-sided, non-BLEND
 // surface (the path started inside geometry).
+bool Integrator::crossBlend(const Hit& h, SampleStream& stream, uint64_t key, uint32_t vertex,
+                            uint32_t sampleIndex, Ray& ray, vec3& beta, int& passes,
+                            bool* absorbed) const {
+  // Pass straight through with probability 1 - alpha, tinted by the base colour, which
+  // matches Tracer::transmittance's (1 - alpha) x baseColor in expectation.
+  const vec4 base = scene_.baseColorAt(h.object, h.triangle, h.bary);
+  const float u = passes == 0
+                      ? draw1D(stream, vertex, kSlotBlend)
+                      : SampleStream(hashValues(key, kBlendTag,
+                                                uint64_t(vertex) * kMaxPassThroughs + passes),
+                                     sampleIndex)
+                            .get1D();
+  if (u >= 1.0f - base.a) return false;
+  beta *= vec3(base);
+  if (++passes > kMaxPassThroughs || isBlack(beta)) {
+    *absorbed = true;
+    return false;
+  }
+  const vec3 y = positionOn(scene_.objects[h.object], h.triangle, h.bary);
+  const vec3 ng = h.geometricNormal;
+  ray.origin = offsetRayOrigin(y, glm::dot(ng, ray.direction) > 0.0f ? ng : -ng);
+  ray.tMin = 0.0f;
+  ray.tMax = kInfinity;
+  return true;
+}
+
 void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,
                            vec3& indirect, uint32_t* backFaceHits) const {
   SampleStream stream(key, sampleIndex);
@@ -410,23 +436,11 @@ void Integrator::tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sample
         out += beta * le * weight;
       }
       if (m.alphaMode != AlphaMode::Blend) break;
-      // BLEND: pass straight through with probability 1 - alpha, tinted by the base colour,
-      // which matches Tracer::transmittance's (1 - alpha) x baseColor in expectation.
-      const vec4 base = scene_.baseColorAt(h.object, h.triangle, h.bary);
-      const float u = passes == 0
-                          ? draw1D(stream, vertex, kSlotBlend)
-                          : SampleStream(hashValues(key, kBlendTag,
-                                                    uint64_t(vertex) * kMaxPassThroughs + passes),
-                                         sampleIndex)
-                                .get1D();
-      if (u >= 1.0f - base.a) break;  // reflect here
-      beta *= vec3(base);
-      if (++passes > kMaxPassThroughs || isBlack(beta)) return;
-      const vec3 y = positionOn(object, h.triangle, h.bary);
-      const vec3 ng = h.geometricNormal;
-      ray.origin = offsetRayOrigin(y, glm::dot(ng, ray.direction) > 0.0f ? ng : -ng);
-      ray.tMin = 0.0f;
-      ray.tMax = kInfinity;
+      bool absorbed = false;
+      if (!crossBlend(h, stream, key, vertex, sampleIndex, ray, beta, passes, &absorbed)) {
+        if (absorbed) return;
+        break;  // reflect here
+      }
     }
     if (!hit) {
       if (settings_.includeSky) {
@@ -518,24 +532,8 @@ bool Integrator::firstRaysSeeBackFaces(vec3 p, vec3 n, uint64_t key, uint32_t fi
       const Object& object = scene_.objects[h.object];
       const MaterialTable::Entry& m = materials_->entries[object.triangleMaterial[h.triangle]];
       if (m.alphaMode != AlphaMode::Blend) break;
-      const vec4 base = scene_.baseColorAt(h.object, h.triangle, h.bary);
-      const float u = passes == 0
-                          ? draw1D(stream, 1, kSlotBlend)
-                          : SampleStream(hashValues(key, kBlendTag,
-                                                    uint64_t(1) * kMaxPassThroughs + passes),
-                                         s)
-                                .get1D();
-      if (u >= 1.0f - base.a) break;  // reflects here: a BLEND surface, not counted
-      beta *= vec3(base);
-      if (++passes > kMaxPassThroughs || isBlack(beta)) {
-        absorbed = true;
-        break;
-      }
-      const vec3 y = positionOn(object, h.triangle, h.bary);
-      const vec3 ng = h.geometricNormal;
-      ray.origin = offsetRayOrigin(y, glm::dot(ng, ray.direction) > 0.0f ? ng : -ng);
-      ray.tMin = 0.0f;
-      ray.tMax = kInfinity;
+      // Reflecting on a BLEND surface: not counted below.
+      if (!crossBlend(h, stream, key, 1, s, ray, beta, passes, &absorbed)) break;
     }
     if (!hit || absorbed) continue;
     const MaterialTable::Entry& m =

@@ -166,6 +166,14 @@ class Integrator {
   vec3 sampleSky(vec3 x, vec3 ns, vec3 ng, vec2 u, vec3* direction = nullptr) const;
   float emitterPdf(uint32_t object, uint32_t triangle, float distance2, float cosLight) const;
   vec3 albedoAt(uint32_t object, uint32_t triangle, vec2 bary) const;
+  // A path segment's hit h on a BLEND surface: passes straight through with probability
+  // 1 - alpha (tinting beta by the base colour and moving ray on past h), or reflects there.
+  // Returns false when the path stops crossing: it reflects (*absorbed false) or it is
+  // absorbed (too many layers or beta black: *absorbed true). The random numbers of vertex
+  // `vertex` of path `sampleIndex`, as tracePath draws them.
+  bool crossBlend(const Hit& h, SampleStream& stream, uint64_t key, uint32_t vertex,
+                  uint32_t sampleIndex, Ray& ray, vec3& beta, int& passes,
+                  bool* absorbed) const;
   void tracePath(Ray ray, float bsdfPdf, uint64_t key, uint32_t sampleIndex, vec3& direct,
                  vec3& indirect, uint32_t* backFaceHits = nullptr) const;
 
