@@ -478,13 +478,15 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
 }
 
 // Stage 5, one set of points of a texel: s.samples paths of the texel's stream [0, N), split
-// evenly over the points (point i takes [i N / k, (i + 1) N / k)), so the union of the
-// texel's paths is one Sobol prefix. They run as kVarianceBatches batches, batch b holding
-// slice b of every point's share (so a batch mean is over the whole texel, not one point),
-// and the spread of the batch means gives the variance of the texel's mean (for the
-// denoiser). How many paths a texel takes is decided before it starts (a fixed count, or the
-// error target's pilot pass, allocateSamples), never from its own paths: a rule that stops
-// where the texel's own paths happen to agree biases it dark.
+// evenly over the points (point i takes [i N / k, (i + 1) N / k); on a footprint grid in a
+// keyed, diagonal order, see below), so the union of the texel's paths is one Sobol prefix.
+// They run as kVarianceBatches batches, batch b holding slice b of every point's share (so
+// a batch mean is over the whole texel, not one point), and the spread of the batch means
+// gives the variance of the texel's mean (for the denoiser); a grid texel with >= 2 paths
+// per point takes the stratified variance from each point's slices instead. How many paths
+// a texel takes is decided before it starts (a fixed count, or the error target's pilot
+// pass, allocateSamples), never from its own paths: a rule that stops where the texel's own
+// paths happen to agree biases it dark.
 // Every decision uses this texel's own samples: the result does not depend on threads.
 //
 // Points inside geometry (back-face share > tolerance, or enclosed) are left out of a valid
