@@ -1,8 +1,9 @@
 // lightmap_bake_test.cpp: the lightmap bake pipeline (lightmap/lightmap_baker.h): analytic
 // texel values (cosine law, constant sky, inverse square, ambient occlusion under a plane),
 // 1/sqrt(samples) convergence, no sun leaking through the two-room scene's shared wall,
-// invalid texels inside geometry (dark beyond bilinear reach), determinism across
-// thread counts, cancellation, presets and setting errors.
+// invalid texels inside geometry (dark beyond bilinear reach), the footprint grid's path
+// split and variance (fewer paths than grid points; a hard shadow across a texel),
+// determinism across thread counts, cancellation, presets and setting errors.
 #include <gtest/gtest.h>
 
 #include <array>
