@@ -35,7 +35,10 @@ struct ProbeTopologySettings {
   // two_rooms_thin's scene probes (0.22; TetGen's 3e-15). The cause is the visibility test at
   // a silhouette (a cell pairs a point behind the wall with a probe whose map footprint mixes
   // wall and doorway texels; gone at 48 x 48 maps), which any split can hit: docs/probes.md,
-  // "Delaunay backends". TetGen is AGPLv3 and only ever linked into the bake tools, never
+  // "Delaunay backends". CGAL as the default with a silhouette cut in the visibility test was
+  // tried and taken back: each change alone fails the atrium's slow sphere test at placement
+  // seed 0 (the cut hid probes from points they see; CGAL's split is one draw of placement:
+  // same docs section). TetGen is AGPLv3 and only ever linked into the bake tools, never
   // kiln_runtime.
   DelaunayBackend backend = DelaunayBackend::TetGen;
   // Probes closer than this fraction of the bounds diagonal are merged.
