@@ -620,6 +620,10 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
       return Error{at + ": " + describe(o) +
                    " has a lightmap in the manifest but is not lightmapped in the scene "
                    "(static, scaleInLightmap or receiveGI changed)"};
+    if (o.uv1.size() != o.positions.size() && o.thinCharts)
+      return Error{at + ": " + describe(o) + " has a lightmap in the manifest, but its " +
+                   "generated charts are too thin for one and it is lit by probes now " +
+                   "(--min-object-texels 0 gives every object a lightmap)"};
     if (o.uv1.size() != o.positions.size())
       return Error{at + ": " + describe(o) + " has no lightmap UVs (TEXCOORD_1)"};
     AtlasObject& ao = layout.objects[i];
