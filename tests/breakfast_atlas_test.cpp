@@ -65,8 +65,8 @@ TEST(BreakfastAtlas, FillsItsPagesAndHoldsLargeChartsAt25To64TexelsPerUnit) {
   ASSERT_TRUE(scene.ok()) << scene.error();
   // Before issue 17's thin-prop rule the six turned chair legs (68-70 charts of 2-10 texels
   // of surface each) were lightmapped from 32 texels per unit: 200-309 texels per chart and
-  // 67.8-70.0% fill at 32-40. Measured with it: 430-1578 texels per chart, 74.4-82.2% fill
-  // (docs/lightmap_outputs.md); the bounds leave a margin of 3 points and 30% below those.
+  // 67.8-70.0% fill at 32-40. Measured with it at 25-64: 430-1578 texels per chart, 74.0-82.2%
+  // fill (docs/lightmap_outputs.md); the bounds leave 3 points and 30% below those.
   for (float r : {25.0f, 29.0f, 32.0f, 36.0f, 40.0f, 45.0f, 50.0f, 53.0f, 57.0f, 64.0f}) {
     const AtlasFigures f = atlasFigures(*scene, r);
     ASSERT_GT(f.charts, 0);
