@@ -407,6 +407,13 @@ TEST(LightmapAtlas, PropsWithChartsThinnerThanATexelAreProbeLitUnderTheAutomatic
     const auto l = packAtlas(every, s);
     ASSERT_TRUE(l.ok()) << l.error();
     EXPECT_EQ(l->objects[beads].lightmapIndex, 0) << minTexels;
+    // --lock-atlas with that manifest on a default bake, whose beads are thin: an error
+    // that says why, not "no lightmap UVs".
+    const nlohmann::json manifest = nlohmann::json::parse(atlasToJson(*l, every).dump());
+    const auto locked = atlasFromManifest(manifest, automatic);
+    ASSERT_FALSE(locked.ok());
+    EXPECT_NE(locked.error().find("too thin"), std::string::npos) << locked.error();
+    EXPECT_NE(locked.error().find("'beads'"), std::string::npos) << locked.error();
   }
 
   // A scene of nothing but beads keeps them (they hold all of its lightmapped surface).
