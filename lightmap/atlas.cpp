@@ -208,10 +208,15 @@ double lightmappedArea(const Scene& scene) {
   return area;
 }
 
+bool chartsTooThin(double surfaceTexels, double coveredTexels) {
+  return coveredTexels > 0.0 && surfaceTexels < kAutoThinCoverage * coveredTexels;
+}
+
 bool tooSmallForLightmap(const Object& object, float resolution, float minTexels,
                          double sceneArea) {
   const double texels = lightmapTexels(object, resolution);
   if (minTexels >= 0.0f) return minTexels > 0.0f && texels < double(minTexels);
+  if (object.thinCharts && object.uv1.size() != object.positions.size()) return true;
   const double density = double(resolution) * object.settings.scaleInLightmap;
   return object.uv1.size() != object.positions.size() &&
          texels < double(kAutoObjectTexelsPerUnit) * resolution &&
@@ -280,14 +285,15 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
   std::vector<uint32_t> lightmapped;
   std::vector<glm::ivec2> sizes(scene.objects.size(), glm::ivec2(0));
   std::vector<std::pair<vec2, vec2>> bounds(scene.objects.size());
-  std::vector<std::string> probeLit;
+  std::vector<std::string> probeLit, thin;
   const double sceneArea = lightmappedArea(scene);
   for (uint32_t i = 0; i < scene.objects.size(); ++i) {
     const Object& o = scene.objects[i];
     if (!isLightmapped(o)) continue;
     if (tooSmallForLightmap(o, settings.resolution, settings.minObjectTexels, sceneArea)) {
       layout.objects[i].probeLit = true;
-      probeLit.push_back("'" + o.name + "'");
+      (o.thinCharts && settings.minObjectTexels < 0.0f ? thin : probeLit)
+          .push_back("'" + o.name + "'");
       continue;
     }
     if (o.uv1.size() != o.positions.size())
@@ -331,6 +337,18 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     const size_t shown = std::min<size_t>(probeLit.size(), 20);
     for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << probeLit[k];
     if (shown < probeLit.size()) w << " and " << probeLit.size() - shown << " more";
+    layout.warnings.push_back(w.str());
+  }
+  if (!thin.empty()) {
+    std::ostringstream w;
+    w << thin.size() << " object(s) have charts too thin for a lightmap at "
+      << settings.resolution << " texels per unit (their surface fills under "
+      << kAutoThinCoverage * 100.0 << "% of the texels their charts touch) and are lit by "
+      << "probes instead (manifest: \"probeLit\"; --min-object-texels 0 gives every object a "
+      << "lightmap): ";
+    const size_t shown = std::min<size_t>(thin.size(), 20);
+    for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << thin[k];
+    if (shown < thin.size()) w << " and " << thin.size() - shown << " more";
     layout.warnings.push_back(w.str());
   }
 
@@ -602,6 +620,10 @@ Result<AtlasLayout> atlasFromManifest(const Manifest& manifest, const Scene& sce
       return Error{at + ": " + describe(o) +
                    " has a lightmap in the manifest but is not lightmapped in the scene "
                    "(static, scaleInLightmap or receiveGI changed)"};
+    if (o.uv1.size() != o.positions.size() && o.thinCharts)
+      return Error{at + ": " + describe(o) + " has a lightmap in the manifest, but its " +
+                   "generated charts are too thin for one and it is lit by probes now " +
+                   "(--min-object-texels 0 gives every object a lightmap)"};
     if (o.uv1.size() != o.positions.size())
       return Error{at + ": " + describe(o) + " has no lightmap UVs (TEXCOORD_1)"};
     AtlasObject& ao = layout.objects[i];

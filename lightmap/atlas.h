@@ -82,6 +82,20 @@ inline constexpr float kMinObjectTexels = -1.0f;
 inline constexpr float kAutoObjectTexelsPerUnit = 5.0f;
 inline constexpr double kAutoObjectAreaShare = 0.01;
 
+// The automatic rule also takes thin props, whatever their area: an object whose generated
+// charts (UnwrapStats) hold surface for under kAutoThinCoverage of the texels they touch on
+// average, i.e. charts about a texel across, each texel of which the object covers only in
+// part (the breakfast room's turned chair legs: 68-70 charts, 0.10-0.18 at 25-64 texels per
+// unit; a chair 0.70-0.76, the teapot 0.52-0.66, a tea cup 0.38-0.63, a lamp 0.28-0.40). Such a
+// lightmap holds no detail the probes do not (a texel is wider than the leg), and its charts
+// of a few texels each cost more gutter than they hold. Also under kAutoObjectAreaShare of
+// the scene's lightmapped surface, and only for UVs kiln generates.
+inline constexpr double kAutoThinCoverage = 0.25;
+
+// Whether an unwrap's charts are too thin for a lightmap (kAutoThinCoverage): surfaceTexels
+// < kAutoThinCoverage x coveredTexels.
+bool chartsTooThin(double surfaceTexels, double coveredTexels);
+
 // The texels an object's surface gets at `resolution` (Unity's rule, before packing):
 // (resolution x scaleInLightmap)^2 x its world area.
 double lightmapTexels(const Object& object, float resolution);
@@ -90,7 +104,8 @@ double lightmapTexels(const Object& object, float resolution);
 double lightmappedArea(const Scene& scene);
 
 // Whether a lightmapped object (isLightmapped) is lit by probes instead: lightmapTexels <
-// minTexels when minTexels >= 0, else the automatic rule above (sceneArea: lightmappedArea).
+// minTexels when minTexels >= 0, else the automatic rule above (sceneArea: lightmappedArea),
+// or Object::thinCharts (set by generateMissingLightmapUvs under the automatic rule).
 bool tooSmallForLightmap(const Object& object, float resolution, float minTexels,
                          double sceneArea);
 

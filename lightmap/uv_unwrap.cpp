@@ -909,6 +909,13 @@ Result<UnwrapResult> generateLightmapUvs(const Object& object, const UnwrapSetti
   }
   s.l2Stretch = sumArea > 0.0 ? std::sqrt(sumStretch / sumArea) : 1.0;
   s.packingEfficiency = uvMax.x * uvMax.y > 0.0 ? uvAreaSum / (uvMax.x * uvMax.y) : 0.0;
+  for (size_t i = 0; i < charts.size(); ++i) {
+    if (shrunk[i]) continue;
+    for (uint32_t t : charts[i].triangles) s.surfaceTexels += m.areas[t] * d * d;
+    const ChartFootprint& f = footprints[i];
+    for (int c = 0; c < f.columns; ++c)
+      s.coveredTexels += std::max(0, f.top[size_t(c)] - f.bottom[size_t(c)]);
+  }
   return r;
 }
 
@@ -942,6 +949,7 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   const size_t n = scene.objects.size();
   std::vector<std::optional<UnwrapResult>> unwraps(n);
   std::vector<std::string> errors(n);
+  std::vector<uint8_t> thin(n, 0);
   const double sceneArea = lightmappedArea(scene);
   auto needs = [&](const Object& o) {
     return isLightmapped(o) && o.uv1.size() != o.positions.size() &&
@@ -981,7 +989,11 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
           s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
           Result<UnwrapResult> r = generateLightmapUvs(
               o, s, i < sealed.size() && !sealed[i].empty() ? &sealed[i] : nullptr);
-          if (r.ok())
+          if (r.ok() && settings.minObjectTexels < 0.0f &&
+              chartsTooThin(r->stats.surfaceTexels, r->stats.coveredTexels) &&
+              o.surfaceArea() < kAutoObjectAreaShare * sceneArea)
+            thin[i] = 1;  // lit by probes (atlas.h kAutoThinCoverage): no UVs
+          else if (r.ok())
             unwraps[i] = std::move(*r);
           else
             errors[i] = r.error();
@@ -993,8 +1005,10 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   progress.finish();
   for (size_t i = 0; i < n; ++i)
     if (!errors[i].empty()) return Error{errors[i]};
-  for (size_t i = 0; i < n; ++i)
+  for (size_t i = 0; i < n; ++i) {
     if (unwraps[i]) scene.objects[i] = applyUnwrap(scene.objects[i], *unwraps[i]);
+    scene.objects[i].thinCharts = thin[i] != 0;
+  }
   return unwraps;
 }
 

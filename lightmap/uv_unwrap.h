@@ -81,6 +81,13 @@ struct UnwrapStats {
   double maxAreaDistortion = 1.0;  // max over triangles of max(s1 s2, 1 / (s1 s2))
   // Sum of UV triangle areas / area of the UV bounding rectangle.
   double packingEfficiency = 0.0;
+  // Over the charts not shrunk as sealed, at texelsPerUnit: the texels their surface holds
+  // (world area x texelsPerUnit^2) and the texels their footprints touch (chart_packer.h: the
+  // texels the conservative rasterizer gives samples). surfaceTexels / coveredTexels is the
+  // share of a touched texel that is the object's surface on average: near 1 for broad
+  // charts, under 0.25 for charts about a texel across (thin legs, rods, handles).
+  double surfaceTexels = 0.0;
+  double coveredTexels = 0.0;
 };
 
 // New vertex arrays for an object: vertices split where charts meet. Triangle i of the result
@@ -111,6 +118,9 @@ Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 
 // For the bake: generates UVs for every lightmapped object (atlas.h isLightmapped) of the
 // scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels),
+// except, with the automatic rule (settings.minObjectTexels < 0), objects whose generated
+// charts come out too thin (atlas.h chartsTooThin): those keep no UVs, get
+// Object::thinCharts and are lit by probes (packAtlas marks them probeLit);
 // with its sealed triangles found by rays over the scene's static objects when
 // settings.shrinkSealed, at texelsPerUnit = resolution x its scaleInLightmap (the
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,

@@ -68,6 +68,10 @@ struct Object {
   std::vector<uvec3> triangles;           // counter-clockwise = front
   std::vector<uint32_t> triangleMaterial;  // index into Scene::materials, per triangle
   ObjectSettings settings;
+  // Set by generateMissingLightmapUvs (lightmap/uv_unwrap.h) under the automatic probe-lit
+  // rule: its generated charts were too thin for a lightmap (atlas.h chartsTooThin), so it
+  // has no UV1 and is lit by probes (atlas.h tooSmallForLightmap).
+  bool thinCharts = false;
 
   // Unit geometric normal of triangle t (front side), and its world-space area.
   vec3 faceNormal(uint32_t t) const;

@@ -309,6 +309,123 @@ TEST(LightmapAtlas, SmallPropsWithoutLightmapUvsAreProbeLitUnderTheAutomaticRule
     EXPECT_FALSE(tooSmallForLightmap(o, 10.0f, kAuto, lightmappedArea(small)));
 }
 
+// One object of n x n cubes of side `side`, 2.5 sides apart (a bead curtain, a chain: a prop
+// of many pieces each smaller than a texel), with flat faces and no lightmap UVs.
+uint32_t addBeads(Scene& scene, const std::string& name, int n, float side) {
+  Scene scratch;
+  Object beads;
+  beads.name = name;
+  beads.nodeIndex = int(scene.objects.size());
+  for (int i = 0; i < n * n; ++i) {
+    const vec3 lo(2.5f * side * float(i % n), 1.0f + 2.5f * side * float(i / n), 0.0f);
+    const Object cube = scratch.objects[test::addBox(scratch, "bead", lo, lo + vec3(side), 0,
+                                                     false)];
+    const uint32_t first = uint32_t(beads.positions.size());
+    beads.positions.insert(beads.positions.end(), cube.positions.begin(), cube.positions.end());
+    beads.normals.insert(beads.normals.end(), cube.normals.begin(), cube.normals.end());
+    for (const uvec3& t : cube.triangles) beads.triangles.push_back(t + uvec3(first));
+  }
+  beads.triangleMaterial.assign(beads.triangles.size(), 0);
+  scene.objects.push_back(std::move(beads));
+  scene.updateBounds();
+  return uint32_t(scene.objects.size() - 1);
+}
+
+TEST(LightmapAtlas, PropsWithChartsThinnerThanATexelAreProbeLitUnderTheAutomaticRule) {
+  // At 20 texels per unit, 30 x 30 beads of 8 mm (0.35 m^2: 138 texels, over the 100 of the
+  // small-prop rule; 0.3% of the scene) hold 0.154 texels each, and every chart touches at
+  // least one texel: their surface fills at most 15% of the texels their charts touch, under
+  // kAutoThinCoverage (25%). A 0.24 m box of about the same area (0.35 m^2) has 4.8-texel
+  // faces: each face touches at most 6 x 6 texels, filled to at least 23 / 36 = 64%.
+  constexpr float kResolution = 20.0f;
+  Scene scene;
+  test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  addFloor(scene, "floor", 10.0f, 10.0f);
+  const uint32_t beads = addBeads(scene, "beads", 30, 0.008f);
+  const uint32_t box = test::addBox(scene, "box", vec3(2, 0, -2), vec3(2.24f, 0.24f, -1.76f), 0,
+                                    false);
+  scene.objects[box].uv1.clear();
+  const double area = lightmappedArea(scene);
+  EXPECT_FALSE(tooSmallForLightmap(scene.objects[beads], kResolution, -1.0f, area));
+
+  UnwrapSettings u;
+  u.texelsPerUnit = kResolution;
+  const Result<UnwrapResult> thin = generateLightmapUvs(scene.objects[beads], u);
+  ASSERT_TRUE(thin.ok()) << thin.error();
+  // Surface texels: 900 beads x 6 faces x (0.008 x 20)^2.
+  EXPECT_NEAR(thin->stats.surfaceTexels, 900 * 6 * 0.16 * 0.16, 0.01);
+  EXPECT_GE(thin->stats.coveredTexels, double(thin->stats.chartCount));
+  EXPECT_GE(thin->stats.chartCount, 900);  // beads share no edge: a chart at least each
+  EXPECT_LT(thin->stats.surfaceTexels, 0.16 * thin->stats.coveredTexels);
+  EXPECT_TRUE(chartsTooThin(thin->stats.surfaceTexels, thin->stats.coveredTexels));
+  const Result<UnwrapResult> broad = generateLightmapUvs(scene.objects[box], u);
+  ASSERT_TRUE(broad.ok()) << broad.error();
+  EXPECT_NEAR(broad->stats.surfaceTexels, 6 * 4.8 * 4.8, 0.01);
+  EXPECT_GT(broad->stats.surfaceTexels, 0.6 * broad->stats.coveredTexels);
+  EXPECT_FALSE(chartsTooThin(broad->stats.surfaceTexels, broad->stats.coveredTexels));
+  std::printf("surface / touched texels: beads %.1f / %.0f (%d charts), box %.1f / %.0f\n",
+              thin->stats.surfaceTexels, thin->stats.coveredTexels, thin->stats.chartCount,
+              broad->stats.surfaceTexels, broad->stats.coveredTexels);
+
+  // The bake's path: the beads keep no UVs, are marked and go to probes with their own
+  // warning; the box gets a lightmap.
+  Scene automatic = scene;
+  UnwrapSettings bake;
+  bake.gutterTexels = 2;
+  auto unwraps = generateMissingLightmapUvs(automatic, kResolution, bake);
+  ASSERT_TRUE(unwraps.ok()) << unwraps.error();
+  EXPECT_FALSE((*unwraps)[beads].has_value());
+  EXPECT_TRUE(automatic.objects[beads].thinCharts);
+  EXPECT_TRUE(automatic.objects[beads].uv1.empty());
+  ASSERT_TRUE((*unwraps)[box].has_value());
+  EXPECT_FALSE(automatic.objects[box].thinCharts);
+  AtlasSettings settings;
+  settings.resolution = kResolution;
+  for (const auto& w : *unwraps) settings.worldPerUv.push_back(w ? w->worldPerUv : 0.0);
+  const auto layout = packAtlas(automatic, settings);
+  ASSERT_TRUE(layout.ok()) << layout.error();
+  EXPECT_TRUE(layout->objects[beads].probeLit);
+  EXPECT_EQ(layout->objects[beads].lightmapIndex, -1);
+  EXPECT_EQ(layout->objects[box].lightmapIndex, 0);
+  ASSERT_EQ(layout->warnings.size(), 1u);
+  EXPECT_NE(layout->warnings[0].find("too thin"), std::string::npos) << layout->warnings[0];
+  EXPECT_NE(layout->warnings[0].find("'beads'"), std::string::npos) << layout->warnings[0];
+
+  // --min-object-texels 0 (every object a lightmap) and N > 0 do not apply the rule.
+  for (float minTexels : {0.0f, 50.0f}) {
+    Scene every = scene;
+    UnwrapSettings all = bake;
+    all.minObjectTexels = minTexels;
+    auto allUnwraps = generateMissingLightmapUvs(every, kResolution, all);
+    ASSERT_TRUE(allUnwraps.ok()) << allUnwraps.error();
+    EXPECT_TRUE((*allUnwraps)[beads].has_value()) << minTexels;
+    EXPECT_FALSE(every.objects[beads].thinCharts);
+    AtlasSettings s = settings;
+    s.minObjectTexels = minTexels;
+    s.worldPerUv.clear();
+    for (const auto& w : *allUnwraps) s.worldPerUv.push_back(w ? w->worldPerUv : 0.0);
+    const auto l = packAtlas(every, s);
+    ASSERT_TRUE(l.ok()) << l.error();
+    EXPECT_EQ(l->objects[beads].lightmapIndex, 0) << minTexels;
+    // --lock-atlas with that manifest on a default bake, whose beads are thin: an error
+    // that says why, not "no lightmap UVs".
+    const nlohmann::json manifest = nlohmann::json::parse(atlasToJson(*l, every).dump());
+    const auto locked = atlasFromManifest(manifest, automatic);
+    ASSERT_FALSE(locked.ok());
+    EXPECT_NE(locked.error().find("too thin"), std::string::npos) << locked.error();
+    EXPECT_NE(locked.error().find("'beads'"), std::string::npos) << locked.error();
+  }
+
+  // A scene of nothing but beads keeps them (they hold all of its lightmapped surface).
+  Scene alone;
+  test::addMaterial(alone, test::lambert(vec3(0.5f)));
+  addBeads(alone, "beads", 30, 0.008f);
+  auto aloneUnwraps = generateMissingLightmapUvs(alone, kResolution, bake);
+  ASSERT_TRUE(aloneUnwraps.ok()) << aloneUnwraps.error();
+  EXPECT_TRUE((*aloneUnwraps)[0].has_value());
+  EXPECT_FALSE(alone.objects[0].thinCharts);
+}
+
 TEST(LightmapAtlas, ManyObjectsPackWithoutOverlapAndDeterministically) {
   const Scene scene = assortedScene(60);
   AtlasSettings settings;

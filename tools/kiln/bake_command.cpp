@@ -367,7 +367,9 @@ void registerBakeCommand(CLI::App& app) {
                 "Objects whose surface would get fewer lightmap texels are lit by probes "
                 "instead (their own probe light in the manifest and output glTF), listed in a "
                 "warning and the manifest (default \"auto\": objects without TEXCOORD_1 under "
-                "5 x --resolution texels and 1% of the lightmapped area; 0 = never)")
+                "5 x --resolution texels and 1% of the lightmapped area, or under 1% whose "
+                "generated charts are too thin: surface under 25% of the texels they touch; "
+                "0 = never)")
       ->check([](const std::string& v) -> std::string {
         if (v == "auto") return "";
         char* end = nullptr;
