@@ -1401,6 +1401,11 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
   unwrap.minObjectTexels = settings.minObjectTexels;
+  if (settings.lockedAtlas) {
+    unwrap.keepCharts.assign(result.scene.objects.size(), 0);
+    for (size_t i = 0; i < settings.lockedAtlas->objects.size() && i < unwrap.keepCharts.size(); ++i)
+      unwrap.keepCharts[i] = settings.lockedAtlas->objects[i].lightmapIndex >= 0;
+  }
   unwrap.showProgress = showProgress;
   unwrap.cancel = cancel;
   auto unwraps = generateMissingLightmapUvs(result.scene, settings.resolution, unwrap);

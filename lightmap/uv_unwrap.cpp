@@ -951,14 +951,16 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
   std::vector<std::string> errors(n);
   std::vector<uint8_t> thin(n, 0);
   const double sceneArea = lightmappedArea(scene);
-  auto needs = [&](const Object& o) {
+  auto kept = [&](size_t i) { return i < settings.keepCharts.size() && settings.keepCharts[i]; };
+  auto needs = [&](size_t i) {
+    const Object& o = scene.objects[i];
     return isLightmapped(o) && o.uv1.size() != o.positions.size() &&
-           !tooSmallForLightmap(o, resolution, settings.minObjectTexels, sceneArea);
+           (kept(i) || !tooSmallForLightmap(o, resolution, settings.minObjectTexels, sceneArea));
   };
   // Progress in triangles: objects differ wildly in size, and time grows with triangles.
   size_t triangles = 0;
-  for (const Object& o : scene.objects)
-    if (needs(o)) triangles += o.triangles.size();
+  for (size_t i = 0; i < n; ++i)
+    if (needs(i)) triangles += scene.objects[i].triangles.size();
   Progress progress("UV generation", triangles, "triangles",
                     settings.showProgress && triangles > 0);
   // Sealed triangles, from rays over the static objects (what the bake's tracer holds). A
@@ -983,13 +985,13 @@ Result<std::vector<std::optional<UnwrapResult>>> generateMissingLightmapUvs(
       [&](size_t begin, size_t end) {
         for (size_t i = begin; i < end; ++i) {
           const Object& o = scene.objects[i];
-          if (!needs(o)) continue;
+          if (!needs(i)) continue;
           if (settings.cancel && settings.cancel->load(std::memory_order_relaxed)) return;
           UnwrapSettings s = settings;
           s.texelsPerUnit = resolution * o.settings.scaleInLightmap;
           Result<UnwrapResult> r = generateLightmapUvs(
               o, s, i < sealed.size() && !sealed[i].empty() ? &sealed[i] : nullptr);
-          if (r.ok() && settings.minObjectTexels < 0.0f &&
+          if (r.ok() && settings.minObjectTexels < 0.0f && !kept(i) &&
               chartsTooThin(r->stats.surfaceTexels, r->stats.coveredTexels) &&
               o.surfaceArea() < kAutoObjectAreaShare * sceneArea)
             thin[i] = 1;  // lit by probes (atlas.h kAutoThinCoverage): no UVs

@@ -59,6 +59,10 @@ struct UnwrapSettings {
   // (atlas.h tooSmallForLightmap with this threshold; keep it equal to the atlas's
   // minObjectTexels) are lit by probes and get no UVs.
   float minObjectTexels = kMinObjectTexels;
+  // generateMissingLightmapUvs only, per scene object (empty: none): objects a locked atlas
+  // (--lock-atlas) gives a page get their charts whatever minObjectTexels says, so that a
+  // manifest from an earlier rule (or from --min-object-texels 0) still locks.
+  std::vector<uint8_t> keepCharts;
   // generateMissingLightmapUvs only: a progress line on stderr ("UV generation", in
   // triangles), and a flag polled between objects that stops it with an Error "cancelled".
   bool showProgress = false;
@@ -120,7 +124,8 @@ Object applyUnwrap(const Object& object, const UnwrapResult& unwrap);
 // scene that has no TEXCOORD_1 and is not too small for a lightmap (settings.minObjectTexels),
 // except, with the automatic rule (settings.minObjectTexels < 0), objects whose generated
 // charts come out too thin (atlas.h chartsTooThin): those keep no UVs, get
-// Object::thinCharts and are lit by probes (packAtlas marks them probeLit);
+// Object::thinCharts and are lit by probes (packAtlas marks them probeLit); objects marked
+// in settings.keepCharts get UVs in every case;
 // with its sealed triangles found by rays over the scene's static objects when
 // settings.shrinkSealed, at texelsPerUnit = resolution x its scaleInLightmap (the
 // other fields of `settings` as given), and replaces the object with applyUnwrap's. Returns,

@@ -414,6 +414,20 @@ TEST(LightmapAtlas, PropsWithChartsThinnerThanATexelAreProbeLitUnderTheAutomatic
     ASSERT_FALSE(locked.ok());
     EXPECT_NE(locked.error().find("too thin"), std::string::npos) << locked.error();
     EXPECT_NE(locked.error().find("'beads'"), std::string::npos) << locked.error();
+    // The bake's path under --lock-atlas: what the manifest gives a page keeps its charts
+    // (keepCharts), so the same manifest locks, with the beads on their page.
+    Scene relocked = scene;
+    UnwrapSettings keep = bake;
+    keep.keepCharts.assign(scene.objects.size(), 0);
+    keep.keepCharts[beads] = 1;
+    auto keptUnwraps = generateMissingLightmapUvs(relocked, kResolution, keep);
+    ASSERT_TRUE(keptUnwraps.ok()) << keptUnwraps.error();
+    EXPECT_TRUE((*keptUnwraps)[beads].has_value());
+    EXPECT_FALSE(relocked.objects[beads].thinCharts);
+    const auto relock = atlasFromManifest(manifest, relocked);
+    ASSERT_TRUE(relock.ok()) << relock.error();
+    EXPECT_EQ(relock->objects[beads].lightmapIndex, 0) << minTexels;
+    EXPECT_FALSE(relock->objects[beads].probeLit);
   }
 
   // A scene of nothing but beads keeps them (they hold all of its lightmapped surface).

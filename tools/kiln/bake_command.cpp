@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
+#include <unordered_map>
 
 #include "lightmap/atlas.h"
 #include "lightmap/lightmap_baker.h"
@@ -147,6 +148,13 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
   UnwrapSettings unwrap;
   unwrap.gutterTexels = std::max(1, settings.padding);
   unwrap.minObjectTexels = settings.minObjectTexels;
+  // What the manifest gives a page keeps its charts (uv_unwrap.h keepCharts).
+  std::unordered_map<int, size_t> byNode;
+  for (size_t i = 0; i < scene.objects.size(); ++i) byNode[scene.objects[i].nodeIndex] = i;
+  unwrap.keepCharts.assign(scene.objects.size(), 0);
+  for (const ManifestObject& mo : manifest.objects)
+    if (auto found = byNode.find(mo.nodeIndex); found != byNode.end() && mo.lightmapIndex >= 0)
+      unwrap.keepCharts[found->second] = 1;
   unwrap.showProgress = !o.quiet;
   unwrap.cancel = &cancelFlag();
   Result<std::vector<std::optional<UnwrapResult>>> uvs =
