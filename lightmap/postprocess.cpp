@@ -260,9 +260,6 @@ constexpr double kConvergedMargin = 2.0;
 constexpr double kNoisy = 0.1, kConverged = 0.05;
 // Interior texels an object needs for its own variance check (calibrateVariance).
 constexpr size_t kCalibrationTexels = 16;
-// The median of chi-square with one degree of freedom: the median of (x_p - m_p)^2 / E[...]
-// for Gaussian noise of the given variance.
-constexpr double kChiSquareMedian = 0.45494;
 // The safeguard window: (2r + 1)^2 texels.
 constexpr int kSafeguardRadius = 5;
 
@@ -312,19 +309,14 @@ std::vector<float> safeguardWeights(const Guides& g, const Image& raw, const Ima
 // is too large (a quasi-Monte Carlo texel whose batch spread overstates its error), and
 // every sigma of the object is scaled by sqrt(R). R >= 1 (a gradient with curvature, or
 // variance given too small) changes nothing: the correction only ever lowers the variance,
-// which makes both SURE safeguards more cautious, never less. An object with at least
-// kCalibrationTexels interior texels takes the smaller of R and the median of its texels'
-// ratios (x_p - m_p)^2 / (var_p + sum_q var_q / 64) over kChiSquareMedian: the curvature of
-// a few texels (a lamp's outline on the Cornell box's ceiling, where the given variance is
-// 1.4x the squared error) lifts R above 1 but not the median. One with fewer interior texels
-// takes the pooled R of the page's small objects.
+// which makes both SURE safeguards more cautious, never less. An object with fewer than
+// kCalibrationTexels interior texels takes the pooled R of the page's small objects.
 void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
   const LightmapPage& page = g.page;
   const int w = page.width(), h = page.height();
   const int32_t objects = objectCount(page);
   std::vector<double> residual(size_t(objects), 0.0), expected(size_t(objects), 0.0);
   std::vector<size_t> count(size_t(objects), 0);
-  std::vector<std::vector<double>> ratios(static_cast<size_t>(objects));
   for (int y = 1; y + 1 < h; ++y)
     for (int x = 1; x + 1 < w; ++x) {
       const size_t i = size_t(y) * w + x;
@@ -340,11 +332,9 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
       if (m < 8) continue;
       const double d = texelLuminance(page.radiance, x, y) - sum / 8.0;
       const size_t o = size_t(texelObject(page, i));
-      const double e = double(sigma[i]) * sigma[i] + var / 64.0;
       residual[o] += d * d;
-      expected[o] += e;
+      expected[o] += double(sigma[i]) * sigma[i] + var / 64.0;
       ++count[o];
-      if (e > 0.0) ratios[o].push_back(d * d / e);
     }
   double smallResidual = 0.0, smallExpected = 0.0;
   for (size_t o = 0; o < size_t(objects); ++o)
@@ -356,19 +346,7 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
   for (size_t o = 0; o < size_t(objects); ++o) {
     const bool own = count[o] >= kCalibrationTexels;
     const double r = own ? residual[o] : smallResidual, e = own ? expected[o] : smallExpected;
-    double ratio = e > 0.0 ? r / e : 1.0;
-    if (own) {
-      // The median of the texels' own ratios, over that of chi-square with one degree
-      // (kChiSquareMedian): a few texels with large curvature (a lamp's outline) raise the
-      // mean ratio above 1 and would leave the whole object's variance unchecked; they do
-      // not move the median. The smaller of both: still only ever lowers.
-      std::vector<double>& v = ratios[o];
-      if (!v.empty()) {
-        std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
-        ratio = std::min(ratio, v[v.size() / 2] / kChiSquareMedian);
-      }
-    }
-    if (e > 0.0 && ratio < 1.0) scale[o] = float(std::sqrt(ratio));
+    if (e > 0.0 && r < e) scale[o] = float(std::sqrt(r / e));
   }
   for (size_t i = 0; i < sigma.size(); ++i)
     if (page.valid[i] && texelObject(page, i) >= 0)

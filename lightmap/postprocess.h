@@ -116,10 +116,8 @@ struct DenoiseSettings {
 // images).
 // The safeguards below judge by the given variance checked against the texels (per object:
 // the spread of each texel about the mean of its 8 neighbours bounds the noise from above,
-// a linear gradient cancelling; the bound is the smaller of the mean ratio and the median
-// texel's, so that the curvature of a few texels, e.g. a lamp's outline, does not lift it),
-// lowered where it is larger than that bound, never raised; the filter's weights use the
-// variance as given.
+// a linear gradient cancelling), lowered where it is larger than that bound, never raised;
+// the filter's weights use the variance as given.
 // Then a safeguard, so that the filter does not add error where it blurs light the samples
 // resolved (a gradient along which the luminance weights still mix): each texel becomes
 // x + a (f - x), raw x, filtered f, with the share a in [0, 1] that minimises Stein's
