@@ -57,7 +57,6 @@ constexpr uint64_t kShadowmaskTag = 0x736d;  // "sm": shadowmask rays' stream
 constexpr uint64_t kEnclosureTag = 0x656e;  // "en": enclosure rays' stream
 constexpr uint64_t kPilotTag = 0x706c;  // "pl": the error target's pilot pass
 constexpr uint64_t kCacheTag = 0x6263;  // "bc": the bounce cache's first pass
-constexpr uint64_t kSplitTag = 0x7370;  // "sp": offset of a footprint grid's path split
 // Enclosure test: cosine-weighted rays per sample point (it stops at the first that
 // escapes, so an open point costs one or two rays).
 constexpr uint32_t kEnclosureRays = 32;
@@ -372,9 +371,6 @@ struct TexelLight {
   vec4 direction{0.5f, 0.5f, 0.5f, 0.5f};  // encodeDominantDirection
   bool valid = false;
   uint32_t samples = 0;    // paths the texel took (over all its points)
-  // Paths per point that its variance's slices are made of: `samples` at a single point or
-  // own points, the fewest paths of a grid point on a footprint grid (qmcVarianceFactor).
-  uint32_t qmcPaths = 0;
   uint64_t rays = 0;       // rays traced for it in stage 5
   // Footprint weight: value x coverage = the mean of E / pi over the texel's whole footprint,
   // points inside geometry included at their own (dark) estimate; the visible share of the
@@ -478,15 +474,13 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
 }
 
 // Stage 5, one set of points of a texel: s.samples paths of the texel's stream [0, N), split
-// evenly over the points (point i takes [i N / k, (i + 1) N / k); on a footprint grid in a
-// keyed, diagonal order, see below), so the union of the texel's paths is one Sobol prefix.
-// They run as kVarianceBatches batches, batch b holding slice b of every point's share (so
-// a batch mean is over the whole texel, not one point), and the spread of the batch means
-// gives the variance of the texel's mean (for the denoiser); a grid texel with >= 2 paths
-// per point takes the stratified variance from each point's slices instead. How many paths
-// a texel takes is decided before it starts (a fixed count, or the error target's pilot
-// pass, allocateSamples), never from its own paths: a rule that stops where the texel's own
-// paths happen to agree biases it dark.
+// evenly over the points (point i takes [i N / k, (i + 1) N / k)), so the union of the
+// texel's paths is one Sobol prefix. They run as kVarianceBatches batches, batch b holding
+// slice b of every point's share (so a batch mean is over the whole texel, not one point),
+// and the spread of the batch means gives the variance of the texel's mean (for the
+// denoiser). How many paths a texel takes is decided before it starts (a fixed count, or the
+// error target's pilot pass, allocateSamples), never from its own paths: a rule that stops
+// where the texel's own paths happen to agree biases it dark.
 // Every decision uses this texel's own samples: the result does not depend on threads.
 //
 // Points inside geometry (back-face share > tolerance, or enclosed) are left out of a valid
@@ -499,26 +493,6 @@ bool enclosed(const Integrator& integrator, const TexelPoint& p, float reach, ui
 // all its points (the physical irradiance of a surface enclosed by geometry, ~0: paths end
 // at back faces, shadow rays are blocked), which it keeps unless it is next to a valid
 // texel (postPage).
-// The order in which lightPoints splits a texel's paths over its grid points (indices into
-// `active`, the grid's points in use): on a full n x n grid (kFootprintGrid) the cells by
-// place p = r n + ((c - r) mod n), i.e. along wrapped diagonals, so that the points at
-// every (k / N)-th place, the ones that get a path when N paths go to k = n^2 points, are
-// one per row and column (4 paths: one diagonal) rather than one column of the grid; a
-// grid with hidden points or cells outside the triangles keeps that order over what is left.
-std::vector<uint32_t> splitOrder(const std::vector<uint32_t>& active, uint32_t pointCount) {
-  constexpr uint32_t n = uint32_t(kFootprintGrid);
-  std::vector<std::pair<uint32_t, uint32_t>> keyed;  // (place, index into active)
-  for (uint32_t j = 0; j < active.size(); ++j) {
-    const uint32_t i = active[j];
-    const uint32_t place = pointCount == n * n ? i / n * n + (i % n + n - i / n % n) % n : i;
-    keyed.push_back({place, j});
-  }
-  std::sort(keyed.begin(), keyed.end());
-  std::vector<uint32_t> order;
-  for (const auto& [place, j] : keyed) order.push_back(j);
-  return order;
-}
-
 TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uint64_t key,
                        const TexelPoint* points, uint32_t pointCount, bool footprintGrid,
                        float enclosedReach, uint64_t& extraRays) {
@@ -591,63 +565,31 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
   };
 
   const uint32_t paths = std::max(s.samples, 1u);
-  // The split of the texel's paths [0, paths) over its points: point j takes
-  // [first[j], first[j] + count[j]). Without a grid, point j takes [j N / k, (j + 1) N / k).
-  // On a footprint grid the points are visited in splitOrder (the grid's cells along
-  // diagonals, so that every k / N-th point of the order is one per row and column) and
-  // the split is shifted by a texel- and seed-keyed offset o in [0, k): the point at place
-  // p of the order takes [floor((p N + o) / k), floor(((p + 1) N + o) / k)). Over o each
-  // point's expected count is exactly N / k (Hermite's identity), so with fewer paths than
-  // points (4 paths over 16 points) the points that get a path change from texel to texel
-  // and from seed to seed; without the offset the same points (3, 7, 11, 15) got the paths
-  // everywhere, a fixed part of the footprint (4-path bakes were 0.6% dark).
-  std::vector<uint32_t> first(k), count(k);
-  if (footprintGrid) {
-    const std::vector<uint32_t> order = splitOrder(active, pointCount);
-    const uint64_t offset = hashValues(key, kSplitTag) % k;
-    for (uint32_t p = 0; p < k; ++p) {
-      const uint32_t j = order[p];
-      first[j] = uint32_t((uint64_t(p) * paths + offset) / k);
-      count[j] = uint32_t((uint64_t(p + 1) * paths + offset) / k) - first[j];
-    }
-  } else {
-    for (uint32_t j = 0; j < k; ++j) {
-      first[j] = uint32_t(uint64_t(j) * paths / k);
-      count[j] = uint32_t(uint64_t(j + 1) * paths / k) - first[j];
-    }
-  }
-  uint32_t minCount = paths;
-  for (uint32_t j = 0; j < k; ++j) minCount = std::min(minCount, count[j]);
-  // Per point and slice (slice b of the point's share, as below): luminance sum and paths.
-  std::vector<std::array<std::pair<double, uint32_t>, kVarianceBatches>> slices(k);
   for (uint32_t b = 0; b < kVarianceBatches; ++b) {
     double lum = 0.0;
     uint32_t n = 0;
     for (uint32_t j = 0; j < k; ++j) {
+      const uint32_t first = uint32_t(uint64_t(j) * paths / k);
+      const uint32_t count = uint32_t(uint64_t(j + 1) * paths / k) - first;
       // On a footprint grid with fewer paths per point than batches (16 points at 16
       // paths: one each), slice b of every point would put all of them in the last batch,
       // leaving one batch and no variance for the denoiser; point j's slices are then
       // rotated by j, so the points' paths spread over the batches.
       const uint32_t slice =
-          footprintGrid && count[j] < kVarianceBatches ? (b + j) % kVarianceBatches : b;
-      const uint32_t bFirst = first[j] + slice * count[j] / kVarianceBatches;
-      const uint32_t bCount = first[j] + (slice + 1) * count[j] / kVarianceBatches - bFirst;
+          footprintGrid && count < kVarianceBatches ? (b + j) % kVarianceBatches : b;
+      const uint32_t bFirst = first + slice * count / kVarianceBatches;
+      const uint32_t bCount = first + (slice + 1) * count / kVarianceBatches - bFirst;
       if (bCount == 0) continue;
-      const double l = run(j, bFirst, bCount);
-      slices[j][slice] = {l, bCount};
-      lum += l;
+      lum += run(j, bFirst, bCount);
       n += bCount;
     }
     if (n > 0) batches.push_back({lum / double(n) * kInvPi, n});
   }
   // Validity from the texel's rays.
-  // A grid point that took no path (fewer paths than points) is not tested: it adds
-  // nothing to the value (a grid texel's fill-seed flag comes from its own points).
   for (uint32_t j = 0; j < k; ++j)
-    inside[j] = (!footprintGrid || sums[j].samples > 0) &&
-                (float(backFaces[j]) > s.backfaceTolerance * float(sums[j].samples) ||
-                 enclosed(integrator, points[active[j]], enclosedReach,
-                          hashValues(key, active[j]), extraRays));
+    inside[j] = float(backFaces[j]) > s.backfaceTolerance * float(sums[j].samples) ||
+                enclosed(integrator, points[active[j]], enclosedReach, hashValues(key, active[j]),
+                         extraRays);
 
   PointSums used, all;
   for (uint32_t j = 0; j < k; ++j) {
@@ -666,19 +608,13 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
   out.value = vec3(total.light / n) * kInvPi;
   // The footprint weight (TexelLight::coverage): the mean over every point of the footprint,
   // each at its own estimate (0 for a point inside a solid), over the value stored. On a
-  // footprint grid that is the visible share when the points inside see nothing. With fewer
-  // paths than visible points, the points that took paths stand for all visible points
-  // (hidden points count 0).
+  // footprint grid that is the visible share when the points inside see nothing.
   out.coverage = 1.0f;
   if (footprintGrid) {
     double footprint = 0.0;
-    uint32_t sampled = 0;
     for (uint32_t j = 0; j < k; ++j)
-      if (sums[j].samples > 0) {
-        footprint += luminance(vec3(sums[j].light / double(sums[j].samples)));
-        ++sampled;
-      }
-    footprint = sampled > 0 ? footprint / double(sampled) * double(k) / double(pointCount) : 0.0;
+      if (sums[j].samples > 0) footprint += luminance(vec3(sums[j].light / double(sums[j].samples)));
+    footprint /= double(pointCount);
     const double stored = luminance(vec3(total.light / n));
     uint32_t visible = 0;
     for (uint32_t j = 0; j < k; ++j) visible += inside[j] ? 0 : 1;
@@ -693,55 +629,15 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
                                             luminance(vec3(total.light / n)), normal);
   }
   if (s.ambientOcclusion) out.ao = 1.0f - float(total.aoOccluded / n);
-  out.qmcPaths = footprintGrid ? minCount : paths;
-  if (footprintGrid && minCount >= 2 && out.valid) {
-    // Every grid point took at least 2 paths: the variance of the texel's mean is the
-    // stratified one, from each point's spread about its own mean (the slices' deviations),
-    // so that it holds the path noise and not the light's variation over the footprint,
-    // which the split fixes (every point gets its share; batch means over different points
-    // held it: 64 paths over 16 points, rotated batches, made the denoiser over-trust
-    // texels beside solids). With slices of n_js paths of point j's n_j (N over the points
-    // in use): E[sum_js (L_js - n_js m_j)^2] = sum_j sigma_j^2 (n_j - sum_s n_js^2 / n_j),
-    // and var(mean) = sum_j n_j sigma_j^2 / N^2, so the sum is divided by N D with
-    // D = sum_j (n_j - sum_s n_js^2 / n_j) (one point: the batch-means formula). Groups of
-    // kGroupBatches slices give the coarse estimate the same way.
-    double ss = 0.0, d = 0.0, gss = 0.0, gd = 0.0, nUsed = 0.0;
-    for (uint32_t j = 0; j < k; ++j) {
-      if (inside[j] || count[j] == 0) continue;
-      const double nj = double(count[j]);
-      double lj = 0.0;
-      for (const auto& [l, nb] : slices[j]) lj += l;
-      const double m = lj / nj;
-      double sq = 0.0;
-      std::array<std::pair<double, double>, kVarianceBatches / kGroupBatches> groups{};
-      for (uint32_t b = 0; b < kVarianceBatches; ++b) {
-        const auto& [l, nb] = slices[j][b];
-        ss += (l - double(nb) * m) * (l - double(nb) * m);
-        sq += double(nb) * double(nb);
-        groups[b / kGroupBatches].first += l;
-        groups[b / kGroupBatches].second += double(nb);
-      }
-      double gsq = 0.0;
-      for (const auto& [l, nb] : groups) {
-        gss += (l - nb * m) * (l - nb * m);
-        gsq += nb * nb;
-      }
-      d += nj - sq / nj;
-      gd += nj - gsq / nj;
-      nUsed += nj;
-    }
-    const double scale = kInvPi * kInvPi;
-    if (d > 0.0) out.variance = float(ss * scale / (nUsed * d));
-    if (gd > 0.0) out.varianceCoarse = float(gss * scale / (nUsed * gd));
-  } else if (out.valid && batches.size() >= 2) {
-    // Variance of the mean from the spread of the batch means.
+  // Variance of the mean from the spread of the batch means.
+  if (out.valid && batches.size() >= 2) {
     const double mean = double(luminance(out.value));
-    double ss = 0.0, pathsSum = 0.0;
+    double ss = 0.0, count = 0.0;
     for (const auto& [l, nb] : batches) {
       ss += double(nb) * (l - mean) * (l - mean);
-      pathsSum += nb;
+      count += nb;
     }
-    out.variance = float(ss / double(batches.size() - 1) / pathsSum);
+    out.variance = float(ss / double(batches.size() - 1) / count);
     // Groups of kGroupBatches consecutive batches: the batches are slices in order, so a
     // group is again one contiguous, aligned slice of every point's share.
     std::vector<std::pair<double, double>> groups;  // (luminance sum, paths)
@@ -756,7 +652,7 @@ TexelLight lightPoints(const Integrator& integrator, const LightSettings& s, uin
         const double m = sum / nb;
         gss += nb * (m - mean) * (m - mean);
       }
-      out.varianceCoarse = float(gss / double(groups.size() - 1) / pathsSum);
+      out.varianceCoarse = float(gss / double(groups.size() - 1) / count);
     }
   }
   return out;
@@ -841,7 +737,7 @@ float qmcVarianceFactor(const std::vector<TexelRef>& texels, const std::vector<T
   double fine = 0.0, coarse = 0.0;
   for (size_t i = 0; i < texels.size(); ++i)
     if (texels[i].page == pageIndex && light[i].valid &&
-        light[i].qmcPaths >= kQmcMinPaths) {
+        light[i].samples >= kQmcMinPaths) {
       fine += light[i].variance;
       coarse += light[i].varianceCoarse;
     }
