@@ -324,6 +324,14 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     lightmapped.push_back(i);
   }
 
+  // The first 20 names of a warning's list, then how many more.
+  auto listNames = [](const std::vector<std::string>& names) {
+    std::string text;
+    const size_t shown = std::min<size_t>(names.size(), 20);
+    for (size_t k = 0; k < shown; ++k) text += (k ? ", " : "") + names[k];
+    if (shown < names.size()) text += " and " + std::to_string(names.size() - shown) + " more";
+    return text;
+  };
   if (!probeLit.empty()) {
     std::ostringstream w;
     w << probeLit.size() << " object(s) would get fewer than ";
@@ -334,10 +342,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
     w << " lightmap texels at " << settings.resolution
       << " texels per unit and are lit by probes instead (manifest: \"probeLit\"; "
       << "--min-object-texels 0 gives every object a lightmap): ";
-    const size_t shown = std::min<size_t>(probeLit.size(), 20);
-    for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << probeLit[k];
-    if (shown < probeLit.size()) w << " and " << probeLit.size() - shown << " more";
-    layout.warnings.push_back(w.str());
+    layout.warnings.push_back(w.str() + listNames(probeLit));
   }
   if (!thin.empty()) {
     std::ostringstream w;
@@ -346,10 +351,7 @@ Result<AtlasLayout> packAtlas(const Scene& scene, const AtlasSettings& settings)
       << kAutoThinCoverage * 100.0 << "% of the texels their charts touch) and are lit by "
       << "probes instead (manifest: \"probeLit\"; --min-object-texels 0 gives every object a "
       << "lightmap): ";
-    const size_t shown = std::min<size_t>(thin.size(), 20);
-    for (size_t k = 0; k < shown; ++k) w << (k ? ", " : "") << thin[k];
-    if (shown < thin.size()) w << " and " << thin.size() - shown << " more";
-    layout.warnings.push_back(w.str());
+    layout.warnings.push_back(w.str() + listNames(thin));
   }
 
   // The texel budget, before packing and before anything the size of a page is allocated:
