@@ -102,12 +102,15 @@ float colourDistance2(const Image& a, const Image& b, size_t i) {
 // The variance of a texel's colour (summed over the channels) per unit variance of its
 // luminance, when the channels' noise is proportional to their values (one path's light
 // scales all three): sum_c x_c^2 / l^2 of the texel's colour x with luminance l.
+// In double: faint light (a texel of 1e-27, which the filter makes of a black texel moved
+// below 0 by the divergence's perturbation) squares to 0 in float, and 0 / 0 was NaN.
 float colourVarianceFactor(const Image& img, size_t i) {
   if (img.channels < 3) return 1.0f;
   const float* p = img.pixels.data() + i * size_t(img.channels);
-  const float l = luminance(vec3(p[0], p[1], p[2]));
-  if (!(l > 0.0f)) return 1.0f;
-  return (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) / (l * l);
+  const double l = luminance(vec3(p[0], p[1], p[2]));
+  if (!(l > 0.0)) return 1.0f;
+  const double r = p[0], g = p[1], b = p[2];
+  return float((r * r + g * g + b * b) / (l * l));
 }
 
 vec3 texel3(const Image& img, int x, int y) {

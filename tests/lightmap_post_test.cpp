@@ -485,6 +485,33 @@ TEST(LightmapDenoise, OverstatedVarianceDoesNotMakeItBlurConvergedLight) {
     }
 }
 
+TEST(LightmapDenoise, FaintTexelsDoNotUnsettleTheObjectTest) {
+  // A nearly converged page (0.3% noise, twice the true variance: the denoiser keeps it raw,
+  // OverstatedVarianceDoesNotMakeItBlurConvergedLight) with a few texels of faint light
+  // (around 1e-27, zero variance: what the filter makes of a black texel the divergence's
+  // perturbation moved below 0, as in two_rooms' room B at --preset low). A texel's colour
+  // variance factor sum x_c^2 / l^2 underflowed to 0 / 0 in float there, and the NaN made
+  // the object's SURE test compare NaN, so the object kept the filter untested. With the
+  // test working the page stays as raw as without those texels.
+  LightmapPage page = colourPage(0.003, 2, 2.0);
+  const int faint[][2] = {{5, 5}, {20, 11}, {kFw / 2, kFh / 2}};
+  for (const auto& f : faint) {
+    page.radiance.at(f[0], f[1])[0] = 4.8e-27f;
+    page.radiance.at(f[0], f[1])[1] = 4.7e-27f;
+    page.radiance.at(f[0], f[1])[2] = 4.5e-27f;
+    page.variance[size_t(f[1] * kFw + f[0])] = 0.0f;
+  }
+  const LightmapPage raw = page;
+  denoise(page);
+  size_t changed = 0;
+  for (size_t k = 0; k < page.radiance.pixels.size(); ++k) {
+    ASSERT_TRUE(std::isfinite(page.radiance.pixels[k])) << k;
+    changed += page.radiance.pixels[k] != raw.radiance.pixels[k];
+  }
+  std::printf("faint texels: %zu of %zu values changed\n", changed, page.radiance.pixels.size());
+  EXPECT_EQ(changed, 0u);
+}
+
 TEST(LightmapDenoise, LowSampleTexelsKeepTheMeanAndNoneBecomesZero) {
   // Four paths per texel, each 0 or 2 x truth (a light seen by half the paths): many texels
   // are 0 with a zero variance estimate, others 2x too bright. The filter keeps the sum,
