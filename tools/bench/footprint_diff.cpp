@@ -30,6 +30,7 @@
 
 #include "lightmap/lightmap_baker.h"
 #include "src/gltf_loader.h"
+#include "src/math.h"
 #include "src/tracer.h"
 
 namespace {
@@ -40,35 +41,13 @@ float lum(const Image& im, size_t i) {
   return luminance(vec3(im.pixels[3 * i], im.pixels[3 * i + 1], im.pixels[3 * i + 2]));
 }
 
-// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection 5.1.5).
-vec3 closestOnTriangle(vec3 p, vec3 a, vec3 b, vec3 c) {
-  const vec3 ab = b - a, ac = c - a, ap = p - a;
-  const float d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const vec3 bp = p - b;
-  const float d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const float vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + d1 / (d1 - d3) * ab;
-  const vec3 cp = p - c;
-  const float d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const float vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + d2 / (d2 - d6) * ac;
-  const float va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-    return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
-  const float denom = 1.0f / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
 // The geometric normal of the triangle of `o` nearest to p.
 vec3 nearestNormal(const Object& o, vec3 p) {
   float best = kInfinity;
   vec3 n(0.0f, 1.0f, 0.0f);
   for (uint32_t t = 0; t < o.triangles.size(); ++t) {
     const uvec3 v = o.triangles[t];
-    const vec3 q = closestOnTriangle(p, o.positions[v.x], o.positions[v.y], o.positions[v.z]);
+    const vec3 q = closestPointOnTriangle(p, o.positions[v.x], o.positions[v.y], o.positions[v.z]);
     const float d = glm::dot(q - p, q - p);
     if (d < best) {
       best = d;
