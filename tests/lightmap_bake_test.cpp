@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <string>
 #include <thread>
 
 #include "lightmap/lightmap_baker.h"
@@ -19,6 +20,13 @@
 
 namespace kiln {
 namespace {
+
+// The index of the scene's object called `name`, or -1.
+int objectNamed(const Scene& scene, const std::string& name) {
+  for (size_t o = 0; o < scene.objects.size(); ++o)
+    if (scene.objects[o].name == name) return int(o);
+  return -1;
+}
 
 // A 2 m x 2 m quad in the plane y = 0 facing +y (uv1 = its unit square).
 Scene quadScene() {
@@ -407,11 +415,8 @@ TEST(LightmapBake, TwoRoomsNoSunLeaksThroughTheSharedWall) {
     auto r = bakeLightmaps(scene, s);
     ASSERT_TRUE(r.ok()) << r.error();
     const Scene& baked = r->scene;
-    int floorIndex = -1, wallIndex = -1;
-    for (size_t o = 0; o < baked.objects.size(); ++o) {
-      if (baked.objects[o].name == "floor") floorIndex = int(o);
-      if (baked.objects[o].name == "wall_shared") wallIndex = int(o);
-    }
+    const int floorIndex = objectNamed(baked, "floor");
+    const int wallIndex = objectNamed(baked, "wall_shared");
     ASSERT_GE(floorIndex, 0);
     ASSERT_GE(wallIndex, 0);
     const float sunlit = sun.intensity * sun.color.r * -sun.direction.y * kInvPi;
@@ -495,9 +500,7 @@ TEST(LightmapBake, FloorTexelsUnderOverlappingWallsTakeNoLightFromOutside) {
     s.denoise = false;
     auto r = bakeLightmaps(scene, s);
     ASSERT_TRUE(r.ok()) << r.error();
-    int floorIndex = -1;
-    for (size_t o = 0; o < r->scene.objects.size(); ++o)
-      if (r->scene.objects[o].name == "floor") floorIndex = int(o);
+    const int floorIndex = objectNamed(r->scene, "floor");
     ASSERT_GE(floorIndex, 0);
     const float shared = std::string(name) == "two_rooms.gltf" ? 0.25f : 0.05f;
     const float xEnd = 8.0f + shared, t = 0.25f, e = 1e-3f;
@@ -577,9 +580,7 @@ TEST(LightmapBake, ThinWallTexelsTakeTheSideOfTheirMainSample) {
   s.samplesPerTexel = 16;
   auto r = bakeLightmaps(scene, s);
   ASSERT_TRUE(r.ok()) << r.error();
-  int floorIndex = -1;
-  for (size_t o = 0; o < r->scene.objects.size(); ++o)
-    if (r->scene.objects[o].name == "floor") floorIndex = int(o);
+  const int floorIndex = objectNamed(r->scene, "floor");
   ASSERT_GE(floorIndex, 0);
   const AtlasObject& ao = r->layout.objects[size_t(floorIndex)];
   ASSERT_GE(ao.lightmapIndex, 0);
