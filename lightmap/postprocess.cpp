@@ -250,17 +250,19 @@ std::vector<float> estimateTexelSize(const LightmapPage& page) {
 
 // Perturbation of the Monte-Carlo divergence estimate, as a fraction of each texel's noise.
 constexpr float kDivergenceStep = 0.02f;
-// The per-object SURE test (denoise): standard errors the estimated gain must exceed, for
-// a noisy object (relative noise >= kNoisy) and for a nearly converged one (<= kConverged;
-// in between it rises linearly). Where the noise is large the gain is large and 1 keeps it;
-// where the samples have resolved the light the gain the filter can make is a few percent,
-// and SURE's misses (an object that passed at 1.3 standard errors with a realised loss)
-// cost more than the gain. Measured on chart 1's Cornell box over 24 seeds (docs/charts.md):
-// with 1 everywhere one seed in 24 came out 0.47% above raw at 256 samples; with 1.5
-// everywhere the gain at 4 samples fell from 25% to 10%.
+// The per-object step (denoise): standard errors taken off SURE's estimate of the noise the
+// result removes, for a noisy object (relative noise >= kNoisy) and for a nearly converged
+// one (<= kConverged; in between it rises linearly). Where the noise is large the gain is
+// large and 1 keeps most of it; where the samples have resolved the light the gain the
+// filter can make is a few percent and SURE's misses cost more than the gain. An object
+// with fewer than kReliableTexels valid texels always takes kConvergedMargin: its estimate
+// sums too few texels (the Cornell box's 9-texel block sides are dark enough to count as
+// noisy at 256 samples; with the noisy margin they took shares that lost on 4-5 of 64
+// seeds, up to +0.02% on the page).
 constexpr double kObjectMargin = 1.0;
 constexpr double kConvergedMargin = 2.0;
 constexpr double kNoisy = 0.1, kConverged = 0.05;
+constexpr double kReliableTexels = 16.0;
 // Interior texels an object needs for its own variance check (calibrateVariance).
 constexpr size_t kCalibrationTexels = 16;
 // The safeguard window: (2r + 1)^2 texels.
@@ -687,23 +689,30 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   };
   const Image input = page.radiance;
   page.radiance = safeguarded(input);
-  // Per object, Stein's estimate of the whole result's risk against the raw texels' risk
-  // (sum var), over the colour channels (the error a reader of the lightmap sees; luminance
-  // alone misses colour the filter blurs across, e.g. the bleeding from a red wall):
-  // SURE(out) - sum var = sum |out - x|^2 + 2 var_rgb (div - 1) over the object's valid
-  // texels, div that of the whole filter-and-safeguard and var_rgb = var x sum_c out_c^2 /
-  // l^2 (each channel's noise in proportion to its value). Where the estimate says the
-  // result is not better than the raw texels (a converged object where choosing the blend
-  // from noisy local estimates costs more than the filter gains), the object keeps its raw
-  // texels. The object keeps the filter only when the estimated gain exceeds a margin
-  // (kObjectMargin to kConvergedMargin by the object's relative noise) times its spread:
-  // the per-texel terms' own spread (sqrt of the sum of their squares), and the spread of
-  // the realised gain about what SURE estimates, which with raw error e and d = out - x
-  // differs from it by 2 e d per texel (variance 4 var_c d_c^2): the test is on the error of
-  // this bake, not its expectation.
+  // Per object, how much of the change d = out - x to keep: out_a = x + a d, a in [0, 1].
+  // With raw error e, the realised change of the squared error (over the colour channels:
+  // the error a reader of the lightmap sees; luminance alone misses colour the filter blurs
+  // across, e.g. the bleeding from a red wall) is |out_a - truth|^2 - |e|^2 = a^2 D - a G
+  // with D = sum |d|^2, known, and G = -2 sum <d, e>, the noise the change removes, which
+  // Stein's lemma estimates as G ~ 2 sum var_rgb (1 - div) over the object's valid texels
+  // (div that of the whole filter-and-safeguard, var_rgb = var x sum_c out_c^2 / l^2: each
+  // channel's noise in proportion to its value). a = G / (2 D) would minimise the expected
+  // error; a loses only where a > G / D. SURE's G is uncertain: the per-texel terms' own
+  // spread (sqrt of the sum of their squares) and the spread of the realised 2 <d, e> about
+  // its expectation (variance 4 var_c d_c^2 per texel), and biased up wherever the given
+  // variance still overstates the noise (quasi-Monte Carlo paths: on the Cornell box's
+  // ceiling at 64 samples SURE's G was 1.3x the realised one on average over 64 seeds and
+  // 2-2.5x on the seeds the old keep-or-raw test lost). So the object takes the a that
+  // maximises the lower bound of its gain, G_low = G - margin x spread: a = G_low / (2 D),
+  // clamped to [0, 1]. Its realised gain is > 0 whenever the realised G exceeds G_low / 2:
+  // half of SURE's lower bound. An object the filter leaves unchanged, or whose G_low <= 0,
+  // keeps its raw texels. The old rule (keep the whole change when G - D exceeds the margin
+  // x spread, else raw) took a = 1 on objects whose realised G fell below D, and lost (7 of
+  // 64 Cornell seeds at 64 samples, worst +1.15%; docs/charts.md).
   const std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
   const int32_t objects = objectCount(page);
-  std::vector<double> excess(size_t(objects), 0.0), spread(size_t(objects), 0.0);
+  std::vector<double> change(size_t(objects), 0.0), removed(size_t(objects), 0.0);
+  std::vector<double> spread(size_t(objects), 0.0), texels(size_t(objects), 0.0);
   std::vector<double> noise(size_t(objects), 0.0), light(size_t(objects), 0.0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -714,8 +723,11 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       const float* out = page.radiance.pixels.data() + i * size_t(c);
       const float* raw = input.pixels.data() + i * size_t(c);
       const double var = double(checked[i]) * checked[i];
-      const double t = colourDistance2(page.radiance, input, i) +
-                       2.0 * var * colourVarianceFactor(page.radiance, i) * (double(div[i]) - 1.0);
+      const double d2 = colourDistance2(page.radiance, input, i);
+      const double gain =
+          2.0 * var * colourVarianceFactor(page.radiance, i) * (1.0 - double(div[i]));
+      // SURE's per-texel term of the risk change at a = 1, d^2 - gain: its spread.
+      const double t = d2 - gain;
       // 4 var_c d_c^2: the variance of 2 e d, the part of the realised gain SURE averages.
       const float l = texelLuminance(page.radiance, x, y);
       double realised = 0.0;
@@ -724,27 +736,36 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
         const double d = double(out[ch]) - raw[ch];
         realised += 4.0 * var * share * share * d * d;
       }
-      excess[o] += t;
+      change[o] += d2;
+      removed[o] += gain;
       spread[o] += t * t + realised;
+      texels[o] += 1.0;
       const double lr = texelLuminance(input, x, y);
       noise[o] += var;
       light[o] += lr * lr;
     }
   // The margin: kObjectMargin for a noisy object, rising to kConvergedMargin as its
-  // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged.
-  std::vector<double> margin(size_t(objects), kObjectMargin);
+  // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged; always
+  // kConvergedMargin for an object of fewer than kReliableTexels texels. Then the share a.
+  std::vector<double> share(size_t(objects), 0.0);
   for (size_t o = 0; o < size_t(objects); ++o) {
     const double relative = light[o] > 0.0 ? std::sqrt(noise[o] / light[o]) : 1.0;
-    const double u = std::clamp((kNoisy - relative) / (kNoisy - kConverged), 0.0, 1.0);
-    margin[o] = kObjectMargin + u * (kConvergedMargin - kObjectMargin);
+    const double u = texels[o] < kReliableTexels
+                         ? 1.0
+                         : std::clamp((kNoisy - relative) / (kNoisy - kConverged), 0.0, 1.0);
+    const double margin = kObjectMargin + u * (kConvergedMargin - kObjectMargin);
+    const double low = removed[o] - margin * std::sqrt(spread[o]);
+    share[o] = change[o] > 0.0 ? std::clamp(low / (2.0 * change[o]), 0.0, 1.0) : 0.0;
   }
   for (size_t i = 0; i < n; ++i) {
     const int32_t object = texelObject(page, i);
     if (!page.valid[i] || object < 0) continue;
-    const size_t o = size_t(object);
-    if (excess[o] >= -margin[o] * std::sqrt(spread[o]))
-      for (int ch = 0; ch < c; ++ch)
-        page.radiance.pixels[i * size_t(c) + size_t(ch)] = input.pixels[i * size_t(c) + size_t(ch)];
+    const double a = share[size_t(object)];
+    for (int ch = 0; ch < c; ++ch) {
+      const size_t k = i * size_t(c) + size_t(ch);
+      page.radiance.pixels[k] =
+          float(double(input.pixels[k]) + a * (double(page.radiance.pixels[k]) - input.pixels[k]));
+    }
   }
   restoreObjectSums(page, input);
 }

@@ -125,13 +125,18 @@ struct DenoiseSettings {
 // / sum |f_q - x_q|^2 over the colour channels (var_q per unit of luminance variance scaled
 // by sum_c f_c^2 / l^2), div = d f_q / d x_q estimated by filtering a perturbed copy once more
 // (Monte-Carlo SURE, Ramani et al. 2008). Where the filter only removed noise a ~ 1; where it
-// moved texels by more than their noise explains a -> 0. Then, per object, SURE of the whole
-// result in colour (its divergence again by perturbation) against the raw texels' risk (sum
-// var): an object the estimate does not find better by more than the spread of the estimate
-// and of this bake's realised gain about it (1 standard error for a noisy object, 2 for one
-// whose relative noise is 5% or less) keeps its raw texels. Last, each object's sum
-// per channel is restored by one factor (> 0: no texel turns negative or 0). Costs four
-// filter runs. Deterministic at any thread count.
+// moved texels by more than their noise explains a -> 0. Then, per object, how much of the
+// whole result's change d = out - x to keep: x + s d with s in [0, 1]. The squared error
+// changes by s^2 D - s G, D = sum |d|^2 and G the noise the change removes (-2 <d, e>, e the
+// raw error), which SURE estimates in colour (its divergence again by perturbation). s is the
+// share that maximises the lower bound of the gain, (G - margin x spread) / (2 D), the spread
+// being that of the estimate and of this bake's realised gain about it (margin 1 standard
+// error for a noisy object, 2 for one whose relative noise is 5% or less or that has fewer
+// than 16 texels): the bake loses only if its realised G falls below half that lower bound,
+// which leaves room for SURE's own bias where the given variance overstates the noise.
+// s = 0 (raw texels) where the lower bound is not positive. Last, each object's sum per
+// channel is restored by one factor (> 0: no texel turns negative or 0). Costs four filter
+// runs. Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
 
 }  // namespace kiln

@@ -17,6 +17,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include "probes/delaunay_backends.h"
+#include "probes/huge_pages.h"
 #include "probes/runtime/src/prefetch.h"
 
 namespace kiln::detail {
@@ -78,10 +79,15 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
       v->info() = int32_t(r.vertices.size() - 1);
     }
     // The cells are read in CGAL's memory order, but their vertices and neighbours lie
-    // anywhere in it (50 MB for 100k probes): the cell kAhead places ahead has its vertices
-    // and neighbours fetched, so that those misses overlap instead of following each other.
+    // anywhere in it (50 MB for 100k probes): the cell kAhead places ahead has the lines this
+    // pass reads of its vertices and neighbours fetched, so that those misses overlap instead
+    // of following each other. A cell is 72 bytes with its number (info) at byte 68, always
+    // past the line the cell starts in; a vertex is 48 bytes with its info at byte 40, past
+    // that line for most vertices: fetching only the first line (as before) left those a miss
+    // each (100k probes: this pass 43-45 -> 30-32 ms CPU, same session, phase timers).
     r.positive = true;  // CGAL's finite cells are positively oriented (exact predicates)
-    r.tets.reserve(dt.number_of_cells());  // finite and infinite: an upper bound, O(1)
+    // finite and infinite: an upper bound, O(1)
+    reserveOnHugePages(r.tets, dt.number_of_cells());
     constexpr int kAhead = 8;
     auto ahead = dt.finite_cells_begin();
     for (int i = 0; i < kAhead && ahead != dt.finite_cells_end(); ++i) ++ahead;
@@ -90,7 +96,9 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
       if (ahead != dt.finite_cells_end()) {
         for (int k = 0; k < 4; ++k) {
           prefetch(&*ahead->vertex(k));
+          prefetch(&ahead->vertex(k)->info());
           prefetch(&*ahead->neighbor(k));
+          prefetch(&ahead->neighbor(k)->info());
         }
         ++ahead;
       }

@@ -12,6 +12,7 @@
 #include "kiln/predicates.h"
 #include "kiln/probe_runtime.h"
 #include "probes/delaunay_backends.h"
+#include "probes/huge_pages.h"
 #include "probes/runtime/src/prefetch.h"
 #include "probes/runtime/src/seed_grid.h"
 
@@ -19,6 +20,7 @@ namespace kiln {
 namespace {
 
 using runtime_detail::prefetch;
+using detail::reserveOnHugePages;
 using glm::dvec2;
 using glm::dvec3;
 
@@ -220,7 +222,9 @@ std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
                                 const std::vector<detail::BackendTet>& tets,
                                 const std::vector<int32_t>& probeOf) {
   const size_t n = words.size();
-  std::vector<uint64_t> swap(n);
+  std::vector<uint64_t> swap;
+  reserveOnHugePages(swap, n);
+  swap.resize(n);
   // LSD radix sort on the 3 x kCurveBits key bits in three passes (stable): sorting the words
   // sorts by key, ties by the backend's index. 10-bit digits keep each pass's counters and
   // write positions in L1 (15-bit ones in two passes scatter over 32768 places).
@@ -285,7 +289,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // (vertex -1) and left out. The records keep backend vertex numbers.
   std::vector<detail::BackendTet>& tets = raw->tets;
   std::vector<uint64_t> words;
-  words.reserve(tets.size());
+  reserveOnHugePages(words, tets.size());
   const CurveKeys curve(lo, hi);
   int flat = 0;
   size_t hullFaces = 0;
@@ -361,8 +365,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   };
   std::vector<int32_t> used(vertexCount, 0);  // per backend vertex
   std::vector<FaceRef> hull;
-  s.cells.reserve(size_t(inner) + hullFaces);
-  s.neighbours.reserve(size_t(inner) + hullFaces);
+  reserveOnHugePages(s.cells, size_t(inner) + hullFaces);
+  reserveOnHugePages(s.neighbours, size_t(inner) + hullFaces);
   if (flat == 0) {
     std::vector<int32_t> newIndex(tets.size());
     for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
@@ -396,6 +400,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       grid.offer(i, ((Q[size_t(t.v[0])] + Q[size_t(t.v[1])]) + Q[size_t(t.v[2])]) +
                         Q[size_t(t.v[3])]);
     }
+    reserveOnHugePages(s.walk, size_t(inner));
     s.walk.resize(size_t(inner));
     makeProbeWalkCells(s.positions, s.cells, s.walk.data());
     s.grid = grid.finish();

@@ -86,9 +86,13 @@ TEST(LightmapBake, ConstantSkyGivesItsRadiance) {
   s.samplesPerTexel = 64;
   // E = pi L over the open hemisphere, so E / pi = L; MIS of sky and cosine sampling of a
   // constant sky is nearly noise-free at 64 paths: measured, the raw texels' relative RMS
-  // deviation is 0.70% (largest 2.0%), the denoised ones' 0.08% (largest 0.31%). Bounds at
-  // about twice those (other CPUs trace other hits), and the denoiser must cut the RMS by 4x
-  // or more on this flat, uniformly lit quad.
+  // deviation is 0.71% (largest 2.3%), the denoised ones' 0.18% (largest 0.52%). Bounds at
+  // about twice those (other CPUs trace other hits), and the denoiser must cut the RMS by 3x
+  // or more on this flat, uniformly lit quad (measured 4.0x). The denoiser keeps the share
+  // of the filter's change that maximises the lower bound of SURE's gain (postprocess.h),
+  // here most but not all of it. Before that rule it kept the whole change (0.08%, largest
+  // 0.31%), the rule that raised single Cornell bakes' error by up to 1.15%
+  // (DenoisingNeverRaisesTheErrorOfOneBake).
   double rawRms = 0.0;
   for (bool denoise : {false, true}) {
     s.denoise = denoise;
@@ -114,8 +118,8 @@ TEST(LightmapBake, ConstantSkyGivesItsRadiance) {
       EXPECT_LT(rms, 0.015);
       EXPECT_LT(worst, 0.04);
     } else {
-      EXPECT_LT(rms, 0.25 * rawRms);
-      EXPECT_LT(worst, 0.006);
+      EXPECT_LT(rms, rawRms / 3.0);
+      EXPECT_LT(worst, 0.01);
     }
   }
 }
@@ -230,6 +234,62 @@ TEST(LightmapBake, ErrorFallsAsOneOverSqrtSamples) {
       EXPECT_LE(e / previous, 0.6);
     }
     previous = e;
+  }
+}
+
+// Relative RMSE over RGB, sqrt(sum |k - r|^2 / sum |r|^2), of `bake` against `reference`
+// over the texels of the reference's visible footprint (coverage > 0), as kiln_compare_bakes
+// measures a bake against a --coverage-map reference.
+double visibleRelativeRmse(const LightmapBakeResult& bake, const LightmapBakeResult& reference) {
+  double ss = 0.0, ref = 0.0;
+  for (size_t p = 0; p < reference.pages.size(); ++p) {
+    const LightmapPageResult& r = reference.pages[p];
+    for (size_t i = 0; i < r.coverage.pixels.size(); ++i) {
+      if (!(r.coverage.pixels[i] > 0.0f)) continue;
+      const glm::dvec3 t(texel(r.light, i)), k(texel(bake.pages[p].light, i));
+      ss += glm::dot(k - t, k - t);
+      ref += glm::dot(t, t);
+    }
+  }
+  return ref > 0.0 ? std::sqrt(ss / ref) : 0.0;
+}
+
+TEST(LightmapBake, DenoisingNeverRaisesTheErrorOfOneBake) {
+  // The per-bake check: `kiln bake tools/scenes/cornell_box.gltf --resolution 14
+  // --max-size 256 --bounces 3 --samples 64 --seed S` with and without the denoiser, each
+  // against a 16384-path bake of another seed, over the 435 visible texels. The seeds are
+  // the three on which the denoiser's old keep-or-raw object test raised the error most
+  // (visible texels, denoised / raw: seed 51 1.0115, 29 1.0090, 25 1.0062); with the share
+  // of each object's change chosen from SURE's lower bound (lightmap/postprocess.cpp)
+  // measured 0.9980, 0.9836 and 0.9893, and 0 of 256 seeds above 1 (docs/charts.md).
+  // The reference's own noise (1/256 of a 64-path bake's variance) moves a ratio by about
+  // 0.1% (measured against a second reference of another seed: at most 0.0011); the bound
+  // allows twice that.
+  const Scene scene = loadShipped("cornell_box.gltf");
+  ASSERT_FALSE(scene.objects.empty());
+  LightmapBakeSettings s;
+  s.resolution = 14.0f;
+  s.maxSize = 256;
+  s.bounces = 3;
+  s.samplesPerTexel = 16384;
+  s.seed = 99999;
+  s.coverageMap = true;
+  auto reference = bakeLightmaps(scene, s);
+  ASSERT_TRUE(reference.ok()) << reference.error();
+  s.samplesPerTexel = 64;
+  s.coverageMap = false;
+  for (uint64_t seed : {51u, 29u, 25u}) {
+    s.seed = seed;
+    s.denoise = false;
+    auto raw = bakeLightmaps(scene, s);
+    s.denoise = true;
+    auto denoised = bakeLightmaps(scene, s);
+    ASSERT_TRUE(raw.ok() && denoised.ok());
+    const double r = visibleRelativeRmse(*raw, *reference);
+    const double d = visibleRelativeRmse(*denoised, *reference);
+    std::printf("seed %d: relative RMSE raw %.5f, denoised %.5f, ratio %.4f\n", int(seed), r, d,
+                d / r);
+    EXPECT_LE(d / r, 1.002) << seed;
   }
 }
 

@@ -453,8 +453,9 @@ TEST(LightmapDenoise, NeverIncreasesTheColourErrorAndKeepsEachChannelsMean) {
       const ColourError after = colourError(page);
       std::printf("colour noise %.3f seed %d: relative RMSE %.6f -> %.6f\n", rel, int(seed),
                   before.rmse, after.rmse);
-      // Measured: 10% lower at 20% noise, unchanged at 3% and 0.5% (each object keeps its
-      // raw texels); the luminance-only safeguard before gave 0.0295 -> 0.197 at 3%.
+      // Measured: 10% lower at 20% noise, 0.02-0.07% lower at 3% (the object keeps a small
+      // share of the change) and unchanged at 0.5% (raw texels); the luminance-only
+      // safeguard before gave 0.0295 -> 0.197 at 3%.
       EXPECT_LE(after.rmse, before.rmse * (1.0 + 1e-6)) << rel << " " << seed;
       for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(after.sum[c] / before.sum[c], 1.0, 1e-5) << rel << " " << seed << " " << c;
