@@ -18,7 +18,8 @@ constexpr uint64_t kObjectPointTag = 0x6f626a656374ULL;  // "object"
 std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer,
                                         std::span<const Bounds3> volumes, uint32_t count,
                                         uint64_t seed, const ProbeValiditySettings& validity,
-                                        const PointSampling& sampling, int threads) {
+                                        const PointSampling& sampling, int threads,
+                                        size_t* objectPoints) {
   const ReachableSpace* reachable = sampling.reachable;
   std::function<bool(vec3)> accept;
   if (reachable && reachable->enabled())
@@ -37,6 +38,7 @@ std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer
           return p;
         return std::nullopt;
       });
+  if (objectPoints) *objectPoints = out.size();
   const std::vector<vec3> uniform =
       randomValidPoints(scene, tracer, volumes, count - objects, seed, validity, threads, accept);
   out.insert(out.end(), uniform.begin(), uniform.end());
@@ -51,7 +53,7 @@ Result<TruthPoints> bakeTruthPoints(const Scene& scene, const Tracer& tracer,
                                     const PointSampling& sampling) {
   TruthPoints out;
   out.points = randomPlacementPoints(scene, tracer, volumes, count, pointSeed, validity, sampling,
-                                     bake.threads);
+                                     bake.threads, &out.objectPoints);
   if (out.points.empty()) return Error{"no valid points in the volumes"};
   out.sh = bakePointSh(scene, tracer, out.points, bake, progress, cancel);
   if (out.sh.empty() || (cancel && cancel->load())) return Error{"cancelled"};

@@ -27,6 +27,7 @@ namespace kiln {
 // kErrorFloorFraction x the mean irradianceRms of the truth.
 struct TruthPoints {
   std::vector<vec3> points;
+  size_t objectPoints = 0;  // the first ones, drawn where objects stand (PointSampling)
   std::vector<ShL2Rgb> sh;
   float floor = 0.0f;
 };
@@ -43,11 +44,13 @@ struct PointSampling {
 
 // `count` random points as `sampling` says, keyed by `seed`; with the defaults exactly
 // randomValidPoints(..., seed, ...). Fewer come back where few are possible (points whose 256
-// attempts all fail are left out). Deterministic at any thread count.
+// attempts all fail are left out). Deterministic at any thread count. `objectPoints`, when
+// given, receives how many of the first points were drawn where objects stand.
 std::vector<vec3> randomPlacementPoints(const Scene& scene, const Tracer& tracer,
                                         std::span<const Bounds3> volumes, uint32_t count,
                                         uint64_t seed, const ProbeValiditySettings& validity,
-                                        const PointSampling& sampling, int threads = 0);
+                                        const PointSampling& sampling, int threads = 0,
+                                        size_t* objectPoints = nullptr);
 
 // `count` random points (randomPlacementPoints with `pointSeed`) and their truth baked with
 // `bake` (its own seed, rays, dering...). Errors: no valid point in the volumes, "cancelled".

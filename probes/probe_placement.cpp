@@ -374,6 +374,12 @@ float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, flo
   return r.error / std::max(r.truth, floor);
 }
 
+float meanIrradianceRatioError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
+  const float r = std::max(luminance(estimate.c[0]), floor) /
+                  std::max(luminance(truth.c[0]), std::max(floor, 1e-30f));
+  return std::max(r, 1.0f / std::max(r, 1e-30f)) - 1.0f;
+}
+
 float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor) {
   const AxisRms r = axisRms(truth, estimate);
   return r.error / std::max({r.truth, r.estimate, floor});
@@ -493,6 +499,29 @@ struct Candidate {
   std::string why;
   bool fixed = false;  // a fixed probe (ProbePlacementSettings::fixedProbes)
 };
+
+// True when p lies in a sheet of light or shade of a baked punctual light thinner than
+// 2 x 9 cm: along some axis, the light's visibility at p differs from both points at +-r
+// (r = 3, 6 or 9 cm). A blind's slats stripe a sunbeam so (the breakfast room: 3 cm lit
+// sheets between 4.7 cm of shade, docs/probe_placement.md round 6); no probe field resolves
+// such light, and picking for it there spreads it over the shade beside it (round 7).
+bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p) {
+  const uint64_t key = positionKey(p);
+  for (uint32_t l = 0; l < scene.lights.size(); ++l) {
+    if (scene.lights[l].mode == LightMode::Realtime) continue;
+    auto lit = [&](vec3 q) {
+      return luminance(integrator.lightVisibility(q, vec3(0.0f), l, key, 0)) > 0.5f;
+    };
+    const bool here = lit(p);
+    for (int axis = 0; axis < 3; ++axis)
+      for (float r : {0.03f, 0.06f, 0.09f}) {
+        vec3 d(0.0f);
+        d[axis] = r;
+        if (lit(p - d) != here && lit(p + d) != here) return true;
+      }
+  }
+  return false;
+}
 
 // Octree corners over one volume (Godot LightmapGI's candidates): cells split down to maxDepth
 // where a surface is within the cell's half-diagonal of its centre or where a baked punctual
@@ -655,6 +684,10 @@ class ProbePlacer {
     // With symmetricPicks, per check point: the error relative to the larger of the truth's
     // and the estimate's light (symmetricIrradianceError), a second ranking for growth.
     std::vector<float> pickError;
+    // Growth's ranking, per check point: with objectRatioPicks the points where objects
+    // stand by meanIrradianceRatioError, the others by their error in `field`; empty when
+    // off (then `field` ranks).
+    std::vector<float> rankError;
     float leak = 0.0f;
     float score = 0.0f;
   };
@@ -707,6 +740,11 @@ class ProbePlacer {
   std::vector<vec3> checks_;
   std::vector<ShL2Rgb> truth_;
   float floor_ = 0.0f;
+  size_t objectChecks_ = 0;  // the first check points, drawn where objects stand
+  // Per check point where objects stand (objectRatioPicks): it lies in a sheet of light or
+  // shade under about 18 cm thick (inThinLightSheet), and growth ranks it by its relative
+  // error as the uniform ones.
+  std::vector<uint8_t> striped_;
   // Per check point: 1 = it scores sets, 0 = it drives growth's picks (holdOut), or 1 for
   // every point when they do both.
   std::vector<uint8_t> scoring_;
@@ -901,9 +939,22 @@ Status ProbePlacer::bakeTruth() {
   scoring_.assign(checks_.size(), 1);
   if (!picksFromScoring_)
     for (size_t i = 0; i < checks_.size(); i += 2) scoring_[i] = 0;
-  result_.checkPointsAboveFloors =
-      std::min(result_.checkPoints,
-               uint32_t(std::lround(double(settings_.checkPoints) * double(sampling.objectShare))));
+  objectChecks_ = truth->objectPoints;
+  result_.checkPointsAboveFloors = uint32_t(objectChecks_);
+  if (settings_.objectRatioPicks && objectChecks_ > 0) {
+    const Integrator integrator(scene_, tracer_, probeIntegratorSettings(scene_, bake_));
+    striped_.assign(objectChecks_, 0);
+    ParallelOptions options;
+    options.threads = settings_.threads;
+    options.grain = 16;
+    parallelFor(
+        objectChecks_,
+        [&](size_t begin, size_t end) {
+          for (size_t i = begin; i < end; ++i)
+            striped_[i] = inThinLightSheet(scene_, integrator, checks_[i]) ? 1 : 0;
+        },
+        options);
+  }
   return Status::success();
 }
 
@@ -982,10 +1033,20 @@ std::optional<ProbePlacer::Scored> ProbePlacer::evaluate(const std::vector<uint3
   }
   Scored out;
   std::vector<ShL2Rgb> estimates;
+  const bool ratioPicks = settings_.objectRatioPicks && objectChecks_ > 0;
   out.field = measureFieldError(*set, checks_, truth_, floor_, settings_.threads, {},
-                                settings_.symmetricPicks ? &estimates : nullptr);
-  for (size_t i = 0; i < estimates.size(); ++i)
-    out.pickError.push_back(symmetricIrradianceError(truth_[i], estimates[i], floor_));
+                                settings_.symmetricPicks || ratioPicks ? &estimates : nullptr);
+  if (settings_.symmetricPicks)
+    for (size_t i = 0; i < estimates.size(); ++i)
+      out.pickError.push_back(symmetricIrradianceError(truth_[i], estimates[i], floor_));
+  if (ratioPicks) {
+    // The floor: half the error floor, taken as an L00 luminance (about 2.5% of the mean
+    // light; what was measured in round 7).
+    out.rankError = out.field.perPoint;
+    for (size_t i = 0; i < objectChecks_; ++i)
+      if (!striped_[i])
+        out.rankError[i] = meanIrradianceRatioError(truth_[i], estimates[i], 0.5f * floor_);
+  }
   double sum = 0.0;
   size_t n = 0;
   for (size_t i = 0; i < checks_.size(); ++i)
@@ -1221,7 +1282,8 @@ void ProbePlacer::grow() {
       }
       return picks;
     };
-    std::vector<std::vector<uint32_t>> batches = {makeBatch(current_->field.perPoint)};
+    std::vector<std::vector<uint32_t>> batches = {makeBatch(
+        current_->rankError.empty() ? current_->field.perPoint : current_->rankError)};
     if (settings_.symmetricPicks) {
       std::vector<uint32_t> symmetric = makeBatch(current_->pickError);
       if (symmetric != batches[0]) batches.push_back(std::move(symmetric));

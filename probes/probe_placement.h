@@ -161,6 +161,14 @@ struct ProbePlacementSettings {
   // for spheres where objects stand in the atrium (docs/probe_placement.md, "Symmetric
   // picks").
   bool symmetricPicks = false;
+  // Ratio picks where objects stand: growth ranks the check points where objects stand
+  // (objectCheckShare) by meanIrradianceRatioError, how far the mean irradiance (L00) the set
+  // gives them is off either way up, and the uniform ones by the relative error as before.
+  // The relative error ranks a sunlit point lit 3x too dark at 2/3 but a shaded point lit 3x
+  // too bright at 2, so growth left sunlit points beside shadow edges lit too dark, which is
+  // where the atrium's spheres failed (docs/probe_placement.md, round 7). The score is the
+  // same either way. false: every check point ranked by the relative error.
+  bool objectRatioPicks = true;
   // A bad check point farther than this x spacing from every free candidate gets a probe
   // of its own (open air, where the octree is coarse); 0 = always a new probe, large = never.
   float candidateReach = 0.25f;
@@ -257,6 +265,13 @@ float relativeIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, flo
 // estimate 3x too bright and one 3x too dark score alike (2/3), where the relative error gives
 // 2 and 2/3. Growth can rank check points by it (ProbePlacementSettings::symmetricPicks).
 float symmetricIrradianceError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
+// How far an estimate's mean irradiance over all normals (the luminance of the L00 term) is
+// from the truth's, either way up: max(r, 1/r) - 1 for r = max(estimate, floor) /
+// max(truth, floor), so 3x too dark and 3x too bright both give 2 (the sphere measure's ratio,
+// sphereError, without the floor). `floor` (an L00 luminance) keeps near-black points, whose
+// truth is mostly noise, from ranking first. Growth ranks the check points where objects stand
+// by it (ProbePlacementSettings::objectRatioPicks).
+float meanIrradianceRatioError(const ShL2Rgb& truth, const ShL2Rgb& estimate, float floor);
 // RMS over the six axis normals of the luminance of E.
 float irradianceRms(const ShL2Rgb& sh);
 // Largest luminance of E over the six axis normals (the leak tests' and chart's measure).
