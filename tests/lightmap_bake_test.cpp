@@ -17,6 +17,7 @@
 #include "lightmap/seams.h"
 #include "src/gltf_loader.h"
 #include "tests/test_util.h"
+#include "tools/lightmap_compare/reference_compare.h"
 
 namespace kiln {
 namespace {
@@ -238,20 +239,14 @@ TEST(LightmapBake, ErrorFallsAsOneOverSqrtSamples) {
 }
 
 // Relative RMSE over RGB, sqrt(sum |k - r|^2 / sum |r|^2), of `bake` against `reference`
-// over the texels of the reference's visible footprint (coverage > 0), as kiln_compare_bakes
-// measures a bake against a --coverage-map reference.
+// over the texels of the reference's visible footprint (coverage > 0): kiln_compare_bakes'
+// measure of a bake against a --coverage-map reference, through the same function.
 double visibleRelativeRmse(const LightmapBakeResult& bake, const LightmapBakeResult& reference) {
-  double ss = 0.0, ref = 0.0;
-  for (size_t p = 0; p < reference.pages.size(); ++p) {
-    const LightmapPageResult& r = reference.pages[p];
-    for (size_t i = 0; i < r.coverage.pixels.size(); ++i) {
-      if (!(r.coverage.pixels[i] > 0.0f)) continue;
-      const glm::dvec3 t(texel(r.light, i)), k(texel(bake.pages[p].light, i));
-      ss += glm::dot(k - t, k - t);
-      ref += glm::dot(t, t);
-    }
-  }
-  return ref > 0.0 ? std::sqrt(ss / ref) : 0.0;
+  ReferenceErrorSums sums;
+  for (size_t p = 0; p < reference.pages.size(); ++p)
+    addBakeDifference(bake.pages[p].light, reference.pages[p].light,
+                      &reference.pages[p].coverage, sums);
+  return sums.relativeRmse();
 }
 
 TEST(LightmapBake, DenoisingNeverRaisesTheErrorOfOneBake) {

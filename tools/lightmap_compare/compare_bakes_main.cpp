@@ -15,7 +15,6 @@
 #include "lightmap/manifest.h"
 #include "tools/lightmap_compare/reference_compare.h"
 #include "src/image.h"
-#include "src/math.h"
 
 namespace {
 
@@ -73,17 +72,7 @@ int main(int argc, char** argv) {
       coverage = std::move(c).value();
       weighted = true;
     }
-    for (int y = 0; y < rb->height; ++y)
-      for (int x = 0; x < rb->width; ++x) {
-        const kiln::vec3 r = rb->rgb(x, y), k = ka->rgb(x, y);
-        if (coverage ? !(coverage->at(x, y)[0] > 0.0f) : r == kiln::vec3(0.0f)) continue;
-        const kiln::vec3 d = k - r;
-        sums.sumSquaredError += double(glm::dot(d, d));
-        sums.sumSquaredReference += double(glm::dot(r, r));
-        sums.sumKiln += double(kiln::luminance(k));
-        sums.sumReference += double(kiln::luminance(r));
-        ++sums.texels;
-      }
+    kiln::addBakeDifference(*ka, *rb, coverage ? &*coverage : nullptr, sums);
   }
   if (sums.texels == 0 || !(sums.sumSquaredReference > 0.0))
     return fail("no texel to compare (a black reference?)");

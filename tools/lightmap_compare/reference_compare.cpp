@@ -11,6 +11,7 @@
 
 #include "lightmap/manifest.h"
 #include "src/image.h"
+#include "src/math.h"
 #include "src/text_file.h"
 
 namespace kiln {
@@ -62,6 +63,21 @@ double ReferenceErrorSums::relativeRmse() const {
 
 double ReferenceErrorSums::meanRatio() const {
   return sumReference > 0.0 ? sumKiln / sumReference : 0.0;
+}
+
+void addBakeDifference(const Image& bake, const Image& reference, const Image* coverage,
+                       ReferenceErrorSums& sums) {
+  for (int y = 0; y < reference.height; ++y)
+    for (int x = 0; x < reference.width; ++x) {
+      const vec3 r = reference.rgb(x, y), k = bake.rgb(x, y);
+      if (coverage ? !(coverage->at(x, y)[0] > 0.0f) : r == vec3(0.0f)) continue;
+      const vec3 d = k - r;
+      sums.sumSquaredError += double(glm::dot(d, d));
+      sums.sumSquaredReference += double(glm::dot(r, r));
+      sums.sumKiln += double(luminance(k));
+      sums.sumReference += double(luminance(r));
+      ++sums.texels;
+    }
 }
 
 Result<ReferenceComparison> compareWithReference(const std::string& referenceDir,

@@ -43,6 +43,15 @@ struct ReferenceErrorSums {
 
 inline constexpr float kHiddenReference = 1e-3f;
 
+// One page of a kiln bake against the same page of another bake of the same atlas, texel by
+// texel (kiln_compare_bakes): adds to `sums` the texels of the reference's baked, visible
+// footprint, coverage > 0 where `coverage` is given (a --coverage-map reference: padding and
+// hidden texels have 0), else every texel whose reference value is not 0 (padding included,
+// as dilated copies). The sums are over R, G and B, the mean ratio's over luminance. The
+// images must be the same size.
+void addBakeDifference(const Image& bake, const Image& reference, const Image* coverage,
+                       ReferenceErrorSums& sums);
+
 struct ObjectReferenceError {
   std::string node;
   int nodeIndex = -1;
