@@ -246,10 +246,16 @@ TEST(ProbePlacement, RandomValidPointsAreValid) {
   }
 }
 
-TEST(ProbePlacement, ErrorMeasureIsZeroForItselfAndScaleInvariant) {
+// The error measures' test light: grey, L00 of 1 and an L1 term of 0.5 along z (c[2]).
+ShL2Rgb greyWithLightAlongZ() {
   ShL2Rgb a;
   a.c[0] = vec3(1.0f);
   a.c[2] = vec3(0.5f);
+  return a;
+}
+
+TEST(ProbePlacement, ErrorMeasureIsZeroForItselfAndScaleInvariant) {
+  const ShL2Rgb a = greyWithLightAlongZ();
   EXPECT_EQ(relativeIrradianceError(a, a, 0.0f), 0.0f);
   EXPECT_NEAR(relativeIrradianceError(a, a * 1.1f, 0.0f), 0.1f, 1e-5f);
   EXPECT_NEAR(relativeIrradianceError(a * 3.0f, a * 3.3f, 0.0f), 0.1f, 1e-5f);
@@ -260,9 +266,7 @@ TEST(ProbePlacement, ErrorMeasureIsZeroForItselfAndScaleInvariant) {
 // and 2/3: greedy picks went to the first kind, and sunlit open air stayed lit by shaded
 // probes, docs/probe_placement.md "Symmetric picks").
 TEST(ProbePlacement, PickErrorIsSymmetricInTruthAndEstimate) {
-  ShL2Rgb a;
-  a.c[0] = vec3(1.0f);
-  a.c[2] = vec3(0.5f);
+  const ShL2Rgb a = greyWithLightAlongZ();
   EXPECT_EQ(symmetricIrradianceError(a, a, 0.0f), 0.0f);
   EXPECT_NEAR(symmetricIrradianceError(a, a * 3.0f, 0.0f), 2.0f / 3.0f, 1e-5f);
   EXPECT_NEAR(symmetricIrradianceError(a * 3.0f, a, 0.0f), 2.0f / 3.0f, 1e-5f);
@@ -279,9 +283,7 @@ TEST(ProbePlacement, PickErrorIsSymmetricInTruthAndEstimate) {
 // a sunlit point lit 3x too dark ranks with a shaded one lit 3x too bright (2 both), where
 // the relative error gives 2/3 and 2; the floor keeps near-black points from ranking first.
 TEST(ProbePlacement, MeanIrradianceRatioErrorCountsBothWaysAlike) {
-  ShL2Rgb a;
-  a.c[0] = vec3(1.0f);
-  a.c[2] = vec3(0.5f);
+  const ShL2Rgb a = greyWithLightAlongZ();
   EXPECT_EQ(meanIrradianceRatioError(a, a, 0.0f), 0.0f);
   EXPECT_NEAR(meanIrradianceRatioError(a, a * 3.0f, 0.0f), 2.0f, 1e-5f);
   EXPECT_NEAR(meanIrradianceRatioError(a * 3.0f, a, 0.0f), 2.0f, 1e-5f);
