@@ -37,6 +37,7 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <unordered_map>
 
 #include "lightmap/directional.h"
 #include "lightmap/probe_lit.h"
@@ -1298,9 +1299,14 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   unwrap.gutterTexels = std::max(1, settings.padding);
   unwrap.minObjectTexels = settings.minObjectTexels;
   if (settings.lockedAtlas) {
+    // What the manifest gives a page keeps its charts; objects are matched by node.
+    std::unordered_map<int, size_t> byNode;
+    for (size_t i = 0; i < result.scene.objects.size(); ++i)
+      byNode[result.scene.objects[i].nodeIndex] = i;
     unwrap.keepCharts.assign(result.scene.objects.size(), 0);
-    for (size_t i = 0; i < settings.lockedAtlas->objects.size() && i < unwrap.keepCharts.size(); ++i)
-      unwrap.keepCharts[i] = settings.lockedAtlas->objects[i].lightmapIndex >= 0;
+    for (const ManifestObject& mo : settings.lockedAtlas->manifest.objects)
+      if (auto found = byNode.find(mo.nodeIndex); found != byNode.end() && mo.lightmapIndex >= 0)
+        unwrap.keepCharts[found->second] = 1;
   }
   unwrap.showProgress = showProgress;
   unwrap.cancel = cancel;
@@ -1317,7 +1323,12 @@ Result<LightmapBakeResult> bakeLightmaps(const Scene& scene, const LightmapBakeS
   atlas.minObjectTexels = settings.minObjectTexels;
   for (const std::optional<UnwrapResult>& u : result.unwraps)
     atlas.worldPerUv.push_back(u ? u->worldPerUv : 0.0);
-  atlas.locked = settings.lockedAtlas;
+  if (settings.lockedAtlas) {
+    Result<AtlasLayout> locked = atlasFromManifest(settings.lockedAtlas->manifest, result.scene,
+                                                   settings.lockedAtlas->file);
+    if (!locked) return Error{"locked atlas: " + locked.error()};
+    atlas.locked = std::move(locked).value();
+  }
   atlas.showProgress = showProgress;
   atlas.cancel = cancel;
   auto layout = packAtlas(result.scene, atlas);

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "lightmap/atlas.h"
+#include "lightmap/manifest.h"
 #include "probes/probe_baker.h"
 #include "lightmap/uv_unwrap.h"
 #include "src/image.h"
@@ -49,7 +50,15 @@ struct LightmapBakeSettings {
   int maxSize = 1024;        // page width/height limit, texels
   // Objects whose surface would get fewer texels are lit by probes instead (atlas.h).
   float minObjectTexels = kMinObjectTexels;
-  std::optional<AtlasLayout> lockedAtlas;  // --lock-atlas
+  // --lock-atlas: an earlier bake's manifest (readManifest, ManifestUse::kAtlas) and its
+  // file, which starts the layout's error messages. The objects it gives a page keep their
+  // charts (uv_unwrap.h keepCharts), the others' UVs are generated as always, and the atlas
+  // is the manifest's (atlasFromManifest, on the scene with its UVs generated).
+  struct LockedAtlas {
+    Manifest manifest;
+    std::string file;
+  };
+  std::optional<LockedAtlas> lockedAtlas;
   // Sampling.
   // Paths per texel (split over the supersamples); with errorTarget > 0, the cap.
   int samplesPerTexel = 256;

@@ -218,7 +218,10 @@ TEST(GltfCoverage, QuantizedCornellBoxBakesLikeTheOriginal) {
   // The original's atlas, locked (as --lock-atlas does), so that texels correspond: at 16
   // texels/m a chart size within a micrometre of a texel boundary may otherwise round either
   // way and shift the packing.
-  s.lockedAtlas = original->layout;
+  Result<Manifest> manifest = readManifest(atlasToJson(original->layout, original->scene),
+                                           "original's atlas", ManifestUse::kAtlas);
+  ASSERT_TRUE(manifest.ok()) << manifest.error();
+  s.lockedAtlas = LightmapBakeSettings::LockedAtlas{*manifest, "original's atlas"};
   auto quantized = bakeLightmaps(q, s);
   s.seed = 2;
   auto reseeded = bakeLightmaps(o, s);

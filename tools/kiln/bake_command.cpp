@@ -14,13 +14,11 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
-#include <unordered_map>
 
 #include "lightmap/atlas.h"
 #include "lightmap/lightmap_baker.h"
 #include "lightmap/lightmap_writer.h"
 #include "lightmap/manifest.h"
-#include "lightmap/uv_unwrap.h"
 #include "src/distributed.h"
 #include "src/progress.h"
 #include "src/text_file.h"
@@ -116,7 +114,7 @@ int applySceneSettings(const Scene& scene, LightmapBakeSettings& b) {
 // --lock-atlas: the earlier bake's layout for this scene. The atlas settings come from that
 // manifest (a different resolution would generate different UVs), so the command line may
 // not contradict them. Returns an exit code.
-int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& settings) {
+int lockAtlas(const BakeOptions& o, LightmapBakeSettings& settings) {
   Result<Manifest> read = readManifestFile(o.lockAtlas, ManifestUse::kAtlas);
   if (!read) {
     printError("--lock-atlas: " + read.error());
@@ -141,35 +139,8 @@ int lockAtlas(const BakeOptions& o, const Scene& scene, LightmapBakeSettings& se
       !take("padding", "--padding", o.padding, s.padding, settings.padding) ||
       !take("maxSize", "--max-size", o.maxSize, s.maxSize, settings.maxSize))
     return kExitBadUsage;
-  // The manifest's texel rectangles are recovered from the objects' UV1 bounds, so objects
-  // whose UVs kiln generates need them generated first, exactly as the bake will.
-  // Same unwrap settings as bakeLightmaps (lightmap_baker.cpp: gutter = max(1, padding)).
-  Scene unwrapped = scene;
-  UnwrapSettings unwrap;
-  unwrap.gutterTexels = std::max(1, settings.padding);
-  unwrap.minObjectTexels = settings.minObjectTexels;
-  // What the manifest gives a page keeps its charts (uv_unwrap.h keepCharts).
-  std::unordered_map<int, size_t> byNode;
-  for (size_t i = 0; i < scene.objects.size(); ++i) byNode[scene.objects[i].nodeIndex] = i;
-  unwrap.keepCharts.assign(scene.objects.size(), 0);
-  for (const ManifestObject& mo : manifest.objects)
-    if (auto found = byNode.find(mo.nodeIndex); found != byNode.end() && mo.lightmapIndex >= 0)
-      unwrap.keepCharts[found->second] = 1;
-  unwrap.showProgress = !o.quiet;
-  unwrap.cancel = &cancelFlag();
-  Result<std::vector<std::optional<UnwrapResult>>> uvs =
-      generateMissingLightmapUvs(unwrapped, settings.resolution, unwrap);
-  if (cancelFlag().load()) return reportInterrupted(o.out);
-  if (!uvs) {
-    printError(scene.path + ": " + uvs.error());
-    return kExitBadInput;
-  }
-  Result<AtlasLayout> layout = atlasFromManifest(manifest, unwrapped, o.lockAtlas);
-  if (!layout) {
-    printError("--lock-atlas: " + layout.error());
-    return kExitBadInput;
-  }
-  settings.lockedAtlas = std::move(layout).value();
+  // bakeLightmaps generates the UVs and recovers the manifest's texel rectangles from them.
+  settings.lockedAtlas = LightmapBakeSettings::LockedAtlas{std::move(read).value(), o.lockAtlas};
   return kExitOk;
 }
 
@@ -250,7 +221,7 @@ int runBake(const BakeOptions& options) {
   output.glb = o.glb;
 
   if (!o.lockAtlas.empty())
-    if (int code = lockAtlas(o, scene, settings)) return code;
+    if (int code = lockAtlas(o, settings)) return code;
 
   // Settings that cannot work together (each alone is range-checked by CLI11 or the loader).
   if (settings.adaptiveSamples &&
