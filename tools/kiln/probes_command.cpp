@@ -59,7 +59,7 @@ struct BakeOptions {
   std::string out;
   int rays = 16384;
   uint64_t seed = 0;
-  std::string backend = "tetgen";
+  std::string backend = "cgal";
   int bounces = -1;          // -1 = the scene's extras.kiln.bounces, else kDefaultProbeBounces
   std::string lightingMode;  // empty = the scene's extras.kiln.lightingMode, else baked-indirect
   int threads = 0;
@@ -443,8 +443,9 @@ void registerProbesCommand(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 30))
       ->capture_default_str();
   b->add_option("--seed", bake->seed, "Seed of every random number")->capture_default_str();
-  b->add_option("--backend", bake->backend, "Tetrahedralization backend")
-      ->check(CLI::IsMember({"tetgen", "cgal"}))
+  b->add_option("--backend", bake->backend,
+                "Tetrahedralization backend: cgal (CGAL's Delaunay) or tetgen (AGPLv3)")
+      ->check(CLI::IsMember({"cgal", "tetgen"}))
       ->capture_default_str();
   b->add_option("--bounces", bake->bounces,
                 "Indirect bounces (default: the scene's extras.kiln.bounces, else " +
