@@ -131,12 +131,19 @@ struct DenoiseSettings {
 // raw error), which SURE estimates in colour (its divergence again by perturbation). s is the
 // share that maximises the lower bound of the gain, (G - margin x spread) / (2 D), the spread
 // being that of the estimate and of this bake's realised gain about it (margin 1 standard
-// error for a noisy object, 2 for one whose relative noise is 5% or less or that has fewer
+// error for a noisy object, 3 for one whose relative noise is 5% or less or that has fewer
 // than 16 texels): the bake loses only if its realised G falls below half that lower bound,
 // which leaves room for SURE's own bias where the given variance overstates the noise.
-// s = 0 (raw texels) where the lower bound is not positive. Last, each object's sum per
-// channel is restored by one factor (> 0: no texel turns negative or 0). Costs four filter
-// runs. Deterministic at any thread count.
+// s = 0 (raw texels) where the lower bound is not positive.
+// With a position buffer, all of the above also runs in a second form: on each object of at
+// least 8 valid texels the filter works on the residual of a least-squares quadratic fit in
+// world position and adds the fit back (at least 1/16 of the texel's own value), so that it
+// does not blur the light's smooth curvature (a peak under a lamp), whose blurring otherwise
+// dominates D on such objects and makes the bake's gain hinge on how its noise happens to
+// lie against that blur. Each object keeps the form whose lower bound guarantees the larger
+// gain, (G - margin x spread)^2 / (4 D). Last, each object's sum per channel is restored by
+// one factor (> 0: no texel turns negative or 0). Costs eight filter runs (four without a
+// position buffer). Deterministic at any thread count.
 void denoise(LightmapPage& page, const DenoiseSettings& settings = {});
 
 }  // namespace kiln

@@ -546,6 +546,63 @@ TEST(LightmapDenoise, LowSampleTexelsKeepTheMeanAndNoneBecomesZero) {
   }
 }
 
+TEST(LightmapDenoise, SmoothPeakOnASmallObjectNeverLoses) {
+  // The Cornell box's ceiling at 64 paths in miniature: one 8 x 8 object (a 0.1 m grid, one
+  // normal) whose light peaks in the middle (0.04 at the corners to 0.14), with Gaussian
+  // noise of 10% and that variance given. The à-trous filter alone blurs the peak by about as
+  // much as it removes noise, and how the noise lies against that blur decided the bake;
+  // the trend candidate (a quadratic fit, the filter on its residual) does not blur it.
+  // Over 256 noise seeds: no seed's denoised error above its raw error, and the mean ratio
+  // well below 1.
+  constexpr int kN = 8, kPage = 10;
+  auto truth = [](int x, int y) {
+    const double dx = (x - 3.5) / 3.5, dy = (y - 3.5) / 3.5;
+    return 0.04 + 0.10 * std::exp(-1.5 * (dx * dx + dy * dy));
+  };
+  int above = 0;
+  double worst = 0.0, sumRatio = 0.0;
+  constexpr int kSeeds = 256;
+  for (int seed = 0; seed < kSeeds; ++seed) {
+    LightmapPage page;
+    page.radiance = Image(kPage, kPage, 3);
+    page.normal = Image(kPage, kPage, 3);
+    page.position = Image(kPage, kPage, 3);
+    page.valid.assign(size_t(kPage * kPage), 0);
+    page.variance.assign(size_t(kPage * kPage), 0.0f);
+    for (int y = 0; y < kN; ++y)
+      for (int x = 0; x < kN; ++x) {
+        const size_t i = size_t((y + 1) * kPage + x + 1);
+        page.valid[i] = 1;
+        const vec3 n(0, -1, 0), p((x + 0.5f) * 0.1f, 1.0f, (y + 0.5f) * 0.1f);
+        std::memcpy(page.normal.at(x + 1, y + 1), &n, sizeof(n));
+        std::memcpy(page.position.at(x + 1, y + 1), &p, sizeof(p));
+        const double sigma = 0.1 * truth(x, y);
+        const float v = float(std::max(0.0, truth(x, y) + sigma * gaussian(i, 5000 + seed)));
+        for (int c = 0; c < 3; ++c) page.radiance.at(x + 1, y + 1)[c] = v;
+        page.variance[i] = float(sigma * sigma);
+      }
+    auto error = [&](const LightmapPage& pg) {
+      double ss = 0.0;
+      for (int y = 0; y < kN; ++y)
+        for (int x = 0; x < kN; ++x) {
+          const double d = pg.radiance.at(x + 1, y + 1)[0] - truth(x, y);
+          ss += d * d;
+        }
+      return ss;
+    };
+    const double raw = error(page);
+    denoise(page);
+    const double ratio = std::sqrt(error(page) / raw);
+    sumRatio += ratio;
+    worst = std::max(worst, ratio);
+    if (ratio > 1.0) ++above;
+  }
+  std::printf("smooth peak: %d of %d seeds above raw, worst %.4f, mean %.4f\n", above, kSeeds,
+              worst, sumRatio / kSeeds);
+  EXPECT_EQ(above, 0);
+  EXPECT_LT(sumRatio / kSeeds, 0.9);
+}
+
 TEST(LightmapDenoise, StrengthZeroIsIdentity) {
   LightmapPage page = noisyPage();
   const Image before = page.radiance;

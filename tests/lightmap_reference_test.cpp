@@ -48,6 +48,7 @@ namespace {
 // 1.0017 with --no-footprint-grid).
 constexpr const char* kBakeArgs = "--preset high --resolution 200 --coverage-map";
 // The targets: RMSE <= 2% and |ratio - 1| <= 1% over all texels (measured 0.89%, 0.9998;
+// 0.82%, 0.9997 with the denoiser's trend candidate, 2026-12-03;
 // the bake is deterministic, so the margin is not eaten by noise). Away from hidden
 // texels kiln is within the reference's own noise: 0.58% against a bound of 1%.
 constexpr double kRmseBound = 0.02;
