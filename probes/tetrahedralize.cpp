@@ -4,6 +4,7 @@
 #include "probes/tetrahedralize.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -195,15 +196,19 @@ ProbeSet emptySet(const Context& ctx, int dimension) {
 
 // ---- dimension 3 -------------------------------------------------------------------------
 
-// The bits of x (kCurveBits of them) spread to every third bit (Morton order).
+// The bits of x (kCurveBits of them) spread to every third bit (Morton order), five at a time
+// from a table (the canonical pass spreads three coordinates per tetrahedron).
 constexpr int kCurveBits = 10;
+constexpr std::array<uint32_t, 32> kSpread5 = [] {
+  std::array<uint32_t, 32> t{};
+  for (uint32_t x = 0; x < 32; ++x) {
+    for (int b = 0; b < 5; ++b) t[x] |= ((x >> b) & 1u) << (3 * b);
+  }
+  return t;
+}();
 uint32_t spreadBits(uint32_t x) {
-  x &= 0x3ff;
-  x = (x | (x << 16)) & 0x030000ff;
-  x = (x | (x << 8)) & 0x0300f00f;
-  x = (x | (x << 4)) & 0x030c30c3;
-  x = (x | (x << 2)) & 0x09249249;
-  return x;
+  static_assert(kCurveBits == 10);
+  return kSpread5[x & 31] | kSpread5[(x >> 5) & 31] << 15;
 }
 uint32_t mortonIndex(uint32_t x, uint32_t y, uint32_t z) {
   return (spreadBits(x) << 2) | (spreadBits(y) << 1) | spreadBits(z);
@@ -367,7 +372,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
   // then faces are matched instead), the hull faces (no tetrahedron beyond) and the seed
   // grid's candidates (each cell offered as buildProbeSeedGrid would, in the same order); then
-  // the walk records over the finished cells, four at a time (makeProbeWalkCells).
+  // the walk records over the finished cells, four at a time (makeProbeWalkCells), and the
+  // cells' backend vertex numbers replaced by their probes.
   auto faceOf = [](glm::ivec4 cell, int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
@@ -411,8 +417,6 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       const runtime_detail::SeedGridBuilder::Offer offer = offers[i % kOfferAhead];
       if (i + kOfferAhead < inner) prepareOffer(i + kOfferAhead);
       const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
-      const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
-                            probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
       glm::ivec4 links(-1);
       // The backend's vertex numbers for now: the walk records below read positions through
       // them (Q, in the backend's spatial order, stays in cache where the probes' order would
@@ -423,6 +427,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
         if (t.n[size_t(k)] >= 0) {
           links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
+          const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                                probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
           hull.push_back(faceOf(cell, i, k));
         }
       }
