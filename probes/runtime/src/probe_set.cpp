@@ -414,8 +414,9 @@ ProbeSeedGrid SeedGridBuilder::finish() {
   // picks (the neighbours at -z, -y, -x, +x, +y, +z have increasing indices). The rest, the
   // cells two or more steps from any filled one, go to the sweep proper, started from the
   // cells one step away that border them, in the order the full sweep would queue those
-  // (by their finder's index, then the direction it found them in): a cell one step away
-  // that borders none of them would find nothing, so leaving it out changes no seed.
+  // (by their finder's index, then the direction it found them in; cells with the same
+  // finder carry its seed, so only the index decides a seed): a cell one step away that
+  // borders none of them would find nothing, so leaving it out changes no seed.
   const glm::ivec3 n = grid_.size;
   const size_t count = key_.size();
   const size_t stride[3] = {1, size_t(n.x), size_t(n.x) * size_t(n.y)};

@@ -12,6 +12,7 @@
 #include <glm/glm.hpp>
 
 #include "kiln/probe_set.h"
+#include "prefetch.h"
 
 namespace kiln::runtime_detail {
 
@@ -46,7 +47,7 @@ class SeedGridBuilder {
     const uint64_t k = d2 < std::numeric_limits<float>::infinity()
                            ? uint64_t(std::bit_cast<uint32_t>(d2)) << 32 | uint32_t(c)
                            : kEmpty;
-    __builtin_prefetch(&key_[i]);
+    prefetch(&key_[i]);
     return {i, k};
   }
   void commit(Offer o) { key_[o.index] = std::min(key_[o.index], o.key); }
