@@ -4,6 +4,7 @@
 #include "probes/tetrahedralize.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -79,6 +80,14 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
     while (keys[i] != kEmpty && keys[i] != k) i = (i + 1) & (capacity - 1);
     return i;
   };
+  // The table is a quarter to half full, so `occupied` alone sends that share of the searches
+  // (8 a probe) on to the keys, a cache miss each: a second bitmap of 64 bits a probe (a bit
+  // set per cell that holds a representative, at the top bits of the same hash) turns away
+  // all but at most 1 in 64 of the searches for empty cells, from 1 MB at 100k probes.
+  int filterBits = 6;
+  while ((size_t(1) << filterBits) < 64 * P.size()) ++filterBits;
+  std::vector<uint64_t> filter((size_t(1) << filterBits) / 64, 0);
+  auto filterBit = [&](uint64_t k) { return size_t((k * 0x9e3779b97f4a7c15ull) >> (64 - filterBits)); };
   for (size_t i = 0; i < P.size(); ++i) {
     const dvec3 p(P[i]);
     const dvec3 f = (p - lo) / cell;
@@ -88,8 +97,11 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
               sz = f.z - g.z < 0.5 ? -1 : 1;
     int32_t found = -1;
     for (int c = 0; c < 8; ++c) {
-      const size_t at = slot(key(gx + (c & 1 ? sx : 0), gy + (c & 2 ? sy : 0),
-                                 gz + (c & 4 ? sz : 0)));
+      const uint64_t k = key(gx + (c & 1 ? sx : 0), gy + (c & 2 ? sy : 0), gz + (c & 4 ? sz : 0));
+      const size_t b = filterBit(k);
+      if (!(filter[b >> 6] >> (b & 63) & 1)) continue;  // no representative in that cell
+      const size_t at = slot(k);
+      if (keys[at] != k) continue;
       for (int32_t j = head[at]; j >= 0; j = next[size_t(j)]) {
         if ((found < 0 || j < found) && glm::length(dvec3(P[j]) - p) <= tol) found = j;
       }
@@ -107,6 +119,8 @@ std::vector<int32_t> mergeDuplicates(const Context& ctx, dvec3 lo, double tol, M
       const size_t at = slot(k);
       keys[at] = k;
       occupied[at >> 6] |= uint64_t(1) << (at & 63);
+      const size_t b = filterBit(k);
+      filter[b >> 6] |= uint64_t(1) << (b & 63);
       next[i] = head[at];
       head[at] = int32_t(i);
     }
@@ -182,15 +196,19 @@ ProbeSet emptySet(const Context& ctx, int dimension) {
 
 // ---- dimension 3 -------------------------------------------------------------------------
 
-// The bits of x (kCurveBits of them) spread to every third bit (Morton order).
+// The bits of x (kCurveBits of them) spread to every third bit (Morton order), five at a time
+// from a table (the canonical pass spreads three coordinates per tetrahedron).
 constexpr int kCurveBits = 10;
+constexpr std::array<uint32_t, 32> kSpread5 = [] {
+  std::array<uint32_t, 32> t{};
+  for (uint32_t x = 0; x < 32; ++x) {
+    for (int b = 0; b < 5; ++b) t[x] |= ((x >> b) & 1u) << (3 * b);
+  }
+  return t;
+}();
 uint32_t spreadBits(uint32_t x) {
-  x &= 0x3ff;
-  x = (x | (x << 16)) & 0x030000ff;
-  x = (x | (x << 8)) & 0x0300f00f;
-  x = (x | (x << 4)) & 0x030c30c3;
-  x = (x | (x << 2)) & 0x09249249;
-  return x;
+  static_assert(kCurveBits == 10);
+  return kSpread5[x & 31] | kSpread5[(x >> 5) & 31] << 15;
 }
 uint32_t mortonIndex(uint32_t x, uint32_t y, uint32_t z) {
   return (spreadBits(x) << 2) | (spreadBits(y) << 1) | spreadBits(z);
@@ -354,15 +372,17 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
   // then faces are matched instead), the hull faces (no tetrahedron beyond) and the seed
   // grid's candidates (each cell offered as buildProbeSeedGrid would, in the same order); then
-  // the walk records over the finished cells, four at a time (makeProbeWalkCells).
-  auto face = [&](int32_t c, int k) {
+  // the walk records over the finished cells, four at a time (makeProbeWalkCells), and the
+  // cells' backend vertex numbers replaced by their probes.
+  auto faceOf = [](glm::ivec4 cell, int32_t c, int k) {
     std::array<int32_t, 3> f{};
     for (int j = 0, m = 0; j < 4; ++j) {
-      if (j != k) f[size_t(m++)] = s.cells[size_t(c)][j];
+      if (j != k) f[size_t(m++)] = cell[j];
     }
     std::sort(f.begin(), f.end());
     return FaceRef{f, c, k};
   };
+  auto face = [&](int32_t c, int k) { return faceOf(s.cells[size_t(c)], c, k); };
   std::vector<int32_t> used(vertexCount, 0);  // per backend vertex
   std::vector<FaceRef> hull;
   reserveOnHugePages(s.cells, size_t(inner) + hullFaces);
@@ -372,37 +392,67 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
     hull.reserve(hullFaces);
     runtime_detail::SeedGridBuilder grid(s.positions, 3, inner, settings.cellsPerSeed);
+    // The seed grid's offers are prepared kOfferAhead cells ahead (their record has arrived
+    // by then) and committed in order.
+    constexpr int32_t kOfferAhead = 8;
+    runtime_detail::SeedGridBuilder::Offer offers[kOfferAhead];
+    auto prepareOffer = [&](int32_t c) {
+      const detail::BackendTet& t = tets[size_t(order[size_t(c)])];
+      offers[c % kOfferAhead] = grid.prepare(
+          c, ((Q[size_t(t.v[0])] + Q[size_t(t.v[1])]) + Q[size_t(t.v[2])]) + Q[size_t(t.v[3])]);
+    };
+    for (int32_t i = 0; i < std::min(kOfferAhead, inner); ++i) prepareOffer(i);
     for (int32_t i = 0; i < inner; ++i) {
       // The backend's records are read in the new order, scattered over 20 MB: fetch the
       // record kAhead cells ahead, and the renumbering entries of its neighbours half as far
       // ahead (by then that record has arrived), so that the misses overlap.
       constexpr int32_t kAhead = 16;
+      static_assert(kOfferAhead <= kAhead / 2);
       if (i + kAhead < inner) prefetch(&tets[size_t(order[size_t(i + kAhead)])]);
       if (i + kAhead / 2 < inner) {
         for (int32_t n : tets[size_t(order[size_t(i + kAhead / 2)])].n) {
           if (n >= 0) prefetch(&newIndex[size_t(n)]);
         }
       }
+      const runtime_detail::SeedGridBuilder::Offer offer = offers[i % kOfferAhead];
+      if (i + kOfferAhead < inner) prepareOffer(i + kOfferAhead);
       const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
-      const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
-                            probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
       glm::ivec4 links(-1);
-      s.cells.push_back(cell);
+      // The backend's vertex numbers for now: the walk records below read positions through
+      // them (Q, in the backend's vertex order, which follows its spatial sort: fewer misses
+      // than the probes' order); replaced by the probes after.
+      s.cells.push_back(glm::ivec4(t.v[0], t.v[1], t.v[2], t.v[3]));
       for (int k = 0; k < 4; ++k) {
         used[size_t(t.v[size_t(k)])] = 1;
         if (t.n[size_t(k)] >= 0) {
           links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
-          hull.push_back(face(i, k));
+          const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
+                                probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
+          hull.push_back(faceOf(cell, i, k));
         }
       }
       s.neighbours.push_back(links);
-      grid.offer(i, ((Q[size_t(t.v[0])] + Q[size_t(t.v[1])]) + Q[size_t(t.v[2])]) +
-                        Q[size_t(t.v[3])]);
+      grid.commit(offer);
     }
+    // The walk records (each a function of its four positions alone, so the same through Q),
+    // made in batches that stay in L1 and appended: no zero-fill of the 43 MB array (at 100k
+    // probes) before they are written.
     reserveOnHugePages(s.walk, size_t(inner));
-    s.walk.resize(size_t(inner));
-    makeProbeWalkCells(s.positions, s.cells, s.walk.data());
+    {
+      constexpr size_t kBatch = 64;
+      ProbeWalkCell batch[kBatch];
+      const std::span<const glm::ivec4> local(s.cells);
+      for (size_t c = 0; c < size_t(inner); c += kBatch) {
+        const size_t m = std::min(kBatch, size_t(inner) - c);
+        makeProbeWalkCells(Q, local.subspan(c, m), batch);
+        s.walk.insert(s.walk.end(), batch, batch + m);
+      }
+    }
+    for (glm::ivec4& cell : s.cells) {
+      cell = glm::ivec4(probeOf[size_t(cell[0])], probeOf[size_t(cell[1])],
+                        probeOf[size_t(cell[2])], probeOf[size_t(cell[3])]);
+    }
     s.grid = grid.finish();
   } else {
     for (int32_t i = 0; i < inner; ++i) {

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <random>
 #include <set>
@@ -163,6 +164,94 @@ TEST(ProbeTopology, SeedGridOfTheBuildPassEqualsARebuild) {
       EXPECT_GT(s.grid.seeds.size(), 100u);
     }
   }
+}
+
+// The seed grid as the build made it before it filled the grid without a sweep over every
+// cell (docs/probes.md "Speed"): each grid cell's seed the inner cell whose centroid, in the
+// grid's float arithmetic, is nearest its centre (the earlier one on a tie), and every empty
+// grid cell the seed of the neighbour from which a breadth-first sweep (filled cells first, in
+// index order; neighbours at -x, +x, -y, +y, -z, +z) reaches it first.
+// `deep` counts the grid cells two or more steps from a filled one, `deepest` the most steps.
+std::vector<int32_t> sweptSeeds(const ProbeSet& s, size_t& deep, int& deepest) {
+  const ProbeSeedGrid& g = s.grid;
+  const glm::ivec3 n = g.size;
+  glm::vec3 scale(0.0f);
+  for (int a = 0; a < 3; ++a) scale[a] = g.max[a] > g.min[a] ? float(n[a]) / (g.max[a] - g.min[a]) : 0.0f;
+  const size_t count = size_t(n.x) * size_t(n.y) * size_t(n.z);
+  std::vector<int32_t> seeds(count, -1);
+  std::vector<float> best(count, std::numeric_limits<float>::infinity());
+  for (int32_t c = 0; c < s.innerCellCount; ++c) {
+    const glm::ivec4 t = s.cells[size_t(c)];
+    const glm::vec3 sum = ((s.positions[size_t(t[0])] + s.positions[size_t(t[1])]) +
+                           s.positions[size_t(t[2])]) + s.positions[size_t(t[3])];
+    const glm::vec3 f = (sum * 0.25f - g.min) * scale;
+    const glm::ivec3 q = glm::clamp(glm::ivec3(f), glm::ivec3(0), n - 1);
+    const glm::vec3 d = f - (glm::vec3(q) + 0.5f);
+    const float d2 = glm::dot(d, d);
+    const size_t i = size_t(q.x) + size_t(n.x) * (size_t(q.y) + size_t(n.y) * size_t(q.z));
+    if (d2 < best[i]) {
+      best[i] = d2;
+      seeds[i] = c;
+    }
+  }
+  std::vector<glm::ivec3> queue;
+  std::vector<int> steps(count, 0);
+  for (int z = 0; z < n.z; ++z)
+    for (int y = 0; y < n.y; ++y)
+      for (int x = 0; x < n.x; ++x)
+        if (seeds[size_t(x) + size_t(n.x) * (size_t(y) + size_t(n.y) * size_t(z))] >= 0)
+          queue.emplace_back(x, y, z);
+  auto index = [&](glm::ivec3 q) {
+    return size_t(q.x) + size_t(n.x) * (size_t(q.y) + size_t(n.y) * size_t(q.z));
+  };
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const glm::ivec3 q = queue[head];
+    for (int a = 0; a < 3; ++a) {
+      for (int side = -1; side <= 1; side += 2) {
+        glm::ivec3 r = q;
+        r[a] += side;
+        if (r[a] < 0 || r[a] >= n[a]) continue;
+        if (seeds[index(r)] < 0) {
+          seeds[index(r)] = seeds[index(q)];
+          steps[index(r)] = steps[index(q)] + 1;
+          deep += steps[index(r)] >= 2 ? 1 : 0;
+          deepest = std::max(deepest, steps[index(r)]);
+          queue.push_back(r);
+        }
+      }
+    }
+  }
+  return seeds;
+}
+
+TEST(ProbeTopology, SeedGridIsTheBreadthFirstSweepsGrid) {
+  // Sets whose grids have empty cells far from any filled one (the sweep's deeper levels):
+  // clusters in corners of their bounds, a sparse set, a dense one, a thin line, a sphere; the
+  // build's own grid (one cell per seed) and buildProbeSeedGrid's with other targets.
+  std::vector<glm::vec3> corners = randomPoints(400, 21, 0.1f);
+  for (const glm::vec3& p : randomPoints(400, 22, 0.1f)) corners.push_back(p + glm::vec3(3.0f, 2.0f, 1.0f));
+  for (const glm::vec3& p : randomPoints(60, 23, 0.05f)) corners.push_back(p + glm::vec3(3.0f, 0.0f, 0.0f));
+  std::vector<glm::vec3> line = randomPoints(300, 24, 0.02f);
+  for (size_t i = 0; i < line.size(); ++i) line[i].x += 0.01f * float(i);
+  // Points on a sphere: the grid's corners outside it are empty, bordered by a curved front.
+  std::vector<glm::vec3> sphere = randomPoints(2000, 27);
+  for (glm::vec3& p : sphere) p = glm::normalize(p);
+  size_t deep = 0;
+  int deepest = 0;
+  for (const auto& pts : {corners, randomPoints(40, 25), randomPoints(5000, 26), line, sphere}) {
+    for (DelaunayBackend backend : {DelaunayBackend::TetGen, DelaunayBackend::Cgal}) {
+      ProbeSet s = build(pts, backend);
+      ASSERT_EQ(s.dimension, 3);
+      EXPECT_EQ(s.grid.seeds, sweptSeeds(s, deep, deepest));
+      for (int target : {4, 16}) {
+        buildProbeSeedGrid(s, target);
+        EXPECT_EQ(s.grid.seeds, sweptSeeds(s, deep, deepest)) << target;
+      }
+    }
+  }
+  // The sets above reach the sweep's deeper levels (where the fast fill hands over to it).
+  EXPECT_GT(deep, 1000u);
+  EXPECT_GE(deepest, 4);
 }
 
 TEST(ProbeTopology, GridProbesAreCosphericalButValid) {
