@@ -202,12 +202,26 @@ constexpr float kH0 = 0.1f;
 constexpr double kMeans[2] = {1.0, 2.0};
 constexpr double kSigma = 0.1;  // relative
 
-LightmapPage noisyPage(bool twoObjects = false, bool sameNormals = false) {
+// A w x h page with radiance, normal and position images, every texel's valid flag `valid`
+// and, with `variance`, a zero variance at every texel.
+LightmapPage blankPage(int w, int h, uint8_t valid, bool variance) {
   LightmapPage page;
-  page.radiance = Image(kW, kH, 3);
-  page.normal = Image(kW, kH, 3);
-  page.position = Image(kW, kH, 3);
-  page.valid.assign(size_t(kW * kH), 0);
+  page.radiance = Image(w, h, 3);
+  page.normal = Image(w, h, 3);
+  page.position = Image(w, h, 3);
+  page.valid.assign(size_t(w * h), valid);
+  if (variance) page.variance.assign(size_t(w * h), 0.0f);
+  return page;
+}
+
+// Texel (x, y)'s surface normal and position.
+void setSurface(LightmapPage& page, int x, int y, const vec3& n, const vec3& p) {
+  std::memcpy(page.normal.at(x, y), &n, sizeof(n));
+  std::memcpy(page.position.at(x, y), &p, sizeof(p));
+}
+
+LightmapPage noisyPage(bool twoObjects = false, bool sameNormals = false) {
+  LightmapPage page = blankPage(kW, kH, 0, false);
   if (twoObjects) page.objectId.assign(size_t(kW * kH), -1);
   for (int y = 1; y < kH; ++y)
     for (int x = 0; x < kW - 1; ++x) {
@@ -219,8 +233,7 @@ LightmapPage noisyPage(bool twoObjects = false, bool sameNormals = false) {
       const vec3 p = side == 0 || sameNormals
                          ? vec3((x + 0.5f) * kH0, 0.0f, (y + 0.5f) * kH0)
                          : vec3(kEdge * kH0, (x - kEdge + 0.5f) * kH0, (y + 0.5f) * kH0);
-      std::memcpy(page.normal.at(x, y), &n, sizeof(n));
-      std::memcpy(page.position.at(x, y), &p, sizeof(p));
+      setSurface(page, x, y, n, p);
       const float v = float(kMeans[side] * (1.0 + kSigma * gaussian(i, 0)));
       for (int c = 0; c < 3; ++c) page.radiance.at(x, y)[c] = v;
     }
@@ -330,18 +343,10 @@ double truthAt(int x, int y) {
 }
 
 LightmapPage planePage() {
-  LightmapPage page;
-  page.radiance = Image(kFw, kFh, 3);
-  page.normal = Image(kFw, kFh, 3);
-  page.position = Image(kFw, kFh, 3);
-  page.valid.assign(size_t(kFw * kFh), 1);
-  page.variance.assign(size_t(kFw * kFh), 0.0f);
+  LightmapPage page = blankPage(kFw, kFh, 1, true);
   for (int y = 0; y < kFh; ++y)
-    for (int x = 0; x < kFw; ++x) {
-      const vec3 n(0, 1, 0), p((x + 0.5f) * 0.1f, 0.0f, (y + 0.5f) * 0.1f);
-      std::memcpy(page.normal.at(x, y), &n, sizeof(n));
-      std::memcpy(page.position.at(x, y), &p, sizeof(p));
-    }
+    for (int x = 0; x < kFw; ++x)
+      setSurface(page, x, y, vec3(0, 1, 0), vec3((x + 0.5f) * 0.1f, 0.0f, (y + 0.5f) * 0.1f));
   return page;
 }
 
@@ -563,19 +568,13 @@ TEST(LightmapDenoise, SmoothPeakOnASmallObjectNeverLoses) {
   double worst = 0.0, sumRatio = 0.0;
   constexpr int kSeeds = 256;
   for (int seed = 0; seed < kSeeds; ++seed) {
-    LightmapPage page;
-    page.radiance = Image(kPage, kPage, 3);
-    page.normal = Image(kPage, kPage, 3);
-    page.position = Image(kPage, kPage, 3);
-    page.valid.assign(size_t(kPage * kPage), 0);
-    page.variance.assign(size_t(kPage * kPage), 0.0f);
+    LightmapPage page = blankPage(kPage, kPage, 0, true);
     for (int y = 0; y < kN; ++y)
       for (int x = 0; x < kN; ++x) {
         const size_t i = size_t((y + 1) * kPage + x + 1);
         page.valid[i] = 1;
-        const vec3 n(0, -1, 0), p((x + 0.5f) * 0.1f, 1.0f, (y + 0.5f) * 0.1f);
-        std::memcpy(page.normal.at(x + 1, y + 1), &n, sizeof(n));
-        std::memcpy(page.position.at(x + 1, y + 1), &p, sizeof(p));
+        setSurface(page, x + 1, y + 1, vec3(0, -1, 0),
+                   vec3((x + 0.5f) * 0.1f, 1.0f, (y + 0.5f) * 0.1f));
         const double sigma = 0.1 * truth(x, y);
         const float v = float(std::max(0.0, truth(x, y) + sigma * gaussian(i, 5000 + seed)));
         for (int c = 0; c < 3; ++c) page.radiance.at(x + 1, y + 1)[c] = v;
