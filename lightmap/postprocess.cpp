@@ -5,12 +5,13 @@
 // the input buffer alone, so rows can run in parallel and results never depend on threads.
 #include "lightmap/postprocess.h"
 
-#include "src/sampling.h"
-
 #include <algorithm>
 #include <array>
 #include <cassert>
 #include <cmath>
+#include <functional>
+
+#include "src/sampling.h"
 
 namespace kiln {
 
@@ -325,7 +326,8 @@ class ObjectTrend {
     forEachActive([&](size_t i, size_t o) {
       const std::array<double, kBasis> phi = basis(i, o);
       for (int a = 0; a < kBasis; ++a)
-        for (int b = 0; b <= a; ++b) gram[o][size_t(a * kBasis + b)] += phi[size_t(a)] * phi[size_t(b)];
+        for (int b = 0; b <= a; ++b)
+          gram[o][size_t(a * kBasis + b)] += phi[size_t(a)] * phi[size_t(b)];
     });
     for (size_t o = 0; o < size_t(objects); ++o) {
       if (!active_[o]) continue;
@@ -358,7 +360,8 @@ class ObjectTrend {
     });
     for (size_t o = 0; o < objects; ++o)
       if (active_[o])
-        for (int ch = 0; ch < c; ++ch) solve(factor_[o], rhs.data() + (o * size_t(c) + size_t(ch)) * kBasis);
+        for (int ch = 0; ch < c; ++ch)
+          solve(factor_[o], rhs.data() + (o * size_t(c) + size_t(ch)) * kBasis);
     Image out = in;
     forEachActive([&](size_t i, size_t o) {
       const std::array<double, kBasis> phi = basis(i, o);
@@ -438,8 +441,8 @@ class ObjectTrend {
 // and its mean square is smallest at a = (s2 - c) / E[d^2] (a Wiener / SURE-style
 // shrinkage). E[d^2] = b^2 + var(d) is measured: the mean of d^2 over the texel's
 // geometrically compatible neighbours of its object in an 11x11 window (one texel's d^2 alone
-// is too noisy a guess; the bias of a blurred gradient is smooth across a few texels). Where the filter
-// only removed noise, d^2 ~ s2 - 2c and a ~ 1; where it moved a texel by much more than the
+// is too noisy a guess; the bias of a blurred gradient is smooth across a few texels). Where the
+// filter only removed noise, d^2 ~ s2 - 2c and a ~ 1; where it moved a texel by much more than the
 // texel's own standard error, the difference is signal and a -> 0 (the raw value stays).
 // s2 is the 3x3 mean of the texels' variance too, so that a texel whose few paths all
 // agreed (variance estimate 0) still trusts its neighbours as much as they do; c ~ self x s2
@@ -517,8 +520,7 @@ void calibrateVariance(const Guides& g, std::vector<float>& sigma) {
     if (e > 0.0 && r < e) scale[o] = float(std::sqrt(r / e));
   }
   for (size_t i = 0; i < sigma.size(); ++i)
-    if (page.valid[i] && texelObject(page, i) >= 0)
-      sigma[i] *= scale[size_t(texelObject(page, i))];
+    if (page.valid[i] && texelObject(page, i) >= 0) sigma[i] *= scale[size_t(texelObject(page, i))];
 }
 
 // Scales each object's valid texels, per channel, so that their sum is the raw sum again:
@@ -648,192 +650,217 @@ std::vector<uint8_t> fillInvalid(Image& image, const std::vector<uint8_t>& valid
   return mask;
 }
 
-void denoise(LightmapPage& page, const DenoiseSettings& settings) {
-  const int w = page.width(), h = page.height(), c = page.radiance.channels;
-  const size_t n = page.texelCount();
-  assert(page.valid.size() == n);
-  assert(page.objectId.empty() || page.objectId.size() == n);
-  assert(page.normal.empty() ||
-         (page.normal.width == w && page.normal.height == h && page.normal.channels >= 3));
-  assert(page.position.empty() ||
-         (page.position.width == w && page.position.height == h && page.position.channels >= 3));
-  assert(page.variance.empty() || page.variance.size() == n);
-  assert(page.texelWorldSize.empty() || page.texelWorldSize.size() == n);
-  if (settings.strength <= 0.0f || settings.iterations <= 0 || n == 0) return;
+namespace {
 
-  Guides g{page, settings, {}};
-  if (g.hasPosition())
-    g.texelSize = page.texelWorldSize.empty() ? estimateTexelSize(page) : page.texelWorldSize;
-  const ParallelOptions rows = rowOptions(settings.parallel);
-
-  // Noise standard deviation per texel: from the given variance, or else a spatial estimate
-  // over the geometrically compatible valid 3x3 neighbours, as SVGF does without history;
-  // but robust: the median absolute deviation (x 1.4826, consistent for Gaussian noise)
-  // rather than the standard deviation, so that a texel beside a shadow edge, with at most
-  // 3 of its 9 neighbours across the edge, measures its own side's noise and not the step.
-  // Texels with fewer than three such texels get the page's mean estimate.
-  std::vector<float> sigma(n, 0.0f);
-  if (!page.variance.empty()) {
-    for (size_t i = 0; i < n; ++i) sigma[i] = std::sqrt(std::max(0.0f, page.variance[i]));
-  } else {
-    std::vector<uint8_t> estimated(n, 0);
-    g.forEachValid(rows, [&](int x, int y, size_t i) {
-      std::array<float, 9> lum;
-      int count = 0;
-      g.forEachCompatible(x, y, 1, [&](size_t j) {
-        lum[size_t(count++)] = texelLuminance(page.radiance, int(j % size_t(w)),
-                                              int(j / size_t(w)));
-      });
-      if (count < 3) return;
-      const float med = median(lum.data(), count);
-      for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
-      sigma[i] = kMadToSigma * median(lum.data(), count);
-      estimated[i] = 1;
-    });
-    double total = 0.0;
-    size_t count = 0;
-    for (size_t i = 0; i < n; ++i)
-      if (estimated[i]) {
-        total += sigma[i];
-        ++count;
-      }
-    const float mean = count ? float(total / double(count)) : 0.0f;
-    for (size_t i = 0; i < n; ++i)
-      if (page.valid[i] && !estimated[i]) sigma[i] = mean;
+// denoise's stages over one page (postprocess.h): the noise per texel, the filter (à-trous
+// passes, optionally on the residual of each object's trend), the per-texel safeguard, and
+// the per-object share of the change, from SURE's lower bound on its gain.
+class Denoiser {
+ public:
+  Denoiser(LightmapPage& page, const DenoiseSettings& settings)
+      : page_(page),
+        settings_(settings),
+        w_(page.width()),
+        h_(page.height()),
+        c_(page.radiance.channels),
+        n_(page.texelCount()),
+        g_{page, settings, {}},
+        rows_(rowOptions(settings.parallel)),
+        trend_(page),
+        objects_(objectCount(page)) {
+    if (g_.hasPosition())
+      g_.texelSize = page.texelWorldSize.empty() ? estimateTexelSize(page) : page.texelWorldSize;
   }
 
-  // The noise the safeguards judge the filter by: the given variance bounded by the texels'
-  // own spread (calibrateVariance). The filter's weights keep the variance as given: where
-  // it overstates the noise they mix more, and the safeguards, with the bounded variance,
-  // decide how much of that to keep.
-  std::vector<float> checked = sigma;
-  if (!page.variance.empty()) calibrateVariance(g, checked);
-
-  // The à-trous passes over `in` (page.radiance or a perturbed copy): the filtered image.
-  // The à-trous passes over `in`; with clampAtZero false (a residual) values may be < 0.
-  auto filterPasses = [&](const Image& in, bool clampAtZero) -> Image {
-  // Variance of each texel's current value, carried through the passes as SVGF does: a
-  // weighted mean with weights w has variance sum(w^2 var) / (sum w)^2 (neighbours taken as
-  // independent), so the luminance threshold shrinks as the noise does.
-  std::vector<float> var(n), nextVar(n, 0.0f);
-  for (size_t i = 0; i < n; ++i) var[i] = sigma[i] * sigma[i];
-  Image src = in, dst = in;
-  // Pair weight of texels p and q (q at a 5x5 à-trous tap of p), symmetric in p and q:
-  // B3 kernel x geometric guides (the smaller of the two directions) x a Gaussian in the
-  // luminance difference over its own standard error, sqrt(var_p + var_q): neighbours whose
-  // difference the noise explains mix, differences the noise does not explain (edges,
-  // gradients resolved by the samples) stop the filter. As the variance falls, so does every
-  // weight: the filter fades out where the estimate is already converged.
-  std::vector<float> lum(n, 0.0f), rowWeight(n, 0.0f);
-  for (int pass = 0; pass < settings.iterations; ++pass) {
-    const int step = 1 << pass;
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) lum[size_t(y) * w + x] = texelLuminance(src, x, y);
-    auto pairWeight = [&](int x, int y, int kx, int ky, size_t i, size_t j) -> float {
-      const int qx = x + (kx - 2) * step, qy = y + (ky - 2) * step;
-      float wq = kB3[kx] * kB3[ky];
-      wq *= std::min(g.geometric(x, y, qx, qy), g.geometric(qx, qy, x, y));
-      if (wq <= 0.0f) return 0.0f;
-      const float d = lum[j] - lum[i];
-      const float v = var[i] + var[j];
-      const float k = settings.sigmaLuminance;
-      if (!(v > 0.0f)) return d == 0.0f ? wq : 0.0f;
-      return wq * std::exp(-0.5f * d * d / (k * k * v));
-    };
-    auto forEachTap = [&](int x, int y, auto&& f) {
-      const size_t i = size_t(y) * w + x;
-      for (int ky = 0; ky < 5; ++ky) {
-        const int qy = y + (ky - 2) * step;
-        if (qy < 0 || qy >= h) continue;
-        for (int kx = 0; kx < 5; ++kx) {
-          const int qx = x + (kx - 2) * step;
-          if (qx < 0 || qx >= w || (kx == 2 && ky == 2)) continue;
-          const size_t j = size_t(qy) * w + qx;
-          if (!page.valid[j] || !g.sameObject(i, j)) continue;
-          f(kx, ky, j);
-        }
-      }
-    };
-    // Each texel's total weight (its own B3 weight included).
-    parallelFor(
-        size_t(h),
-        [&](size_t begin, size_t end) {
-          for (size_t yy = begin; yy < end; ++yy)
-            for (int x = 0; x < w; ++x) {
-              const int y = int(yy);
-              const size_t i = size_t(y) * w + x;
-              if (!page.valid[i]) continue;
-              double total = double(kB3[2]) * kB3[2];
-              forEachTap(x, y, [&](int kx, int ky, size_t j) {
-                total += pairWeight(x, y, kx, ky, i, j);
-              });
-              rowWeight[i] = float(total);
-            }
-        },
-        rows);
-    // out_p = x_p + sum_q a_pq (x_q - x_p), a_pq = w_pq / max(W_p, W_q): a is symmetric, so
-    // the texels' sum (their mean) is kept exactly, and sum_q a_pq < 1, so out_p is a convex
-    // combination of non-negative values with a positive share of x_p: never negative, and
-    // never 0 where x_p > 0.
-    parallelFor(
-        size_t(h),
-        [&](size_t begin, size_t end) {
-          std::vector<double> sum(static_cast<size_t>(c));
-          for (size_t yy = begin; yy < end; ++yy) {
-            const int y = int(yy);
-            for (int x = 0; x < w; ++x) {
-              const size_t i = size_t(y) * w + x;
-              if (!page.valid[i]) continue;  // dst already holds the input value
-              const float* p = src.at(x, y);
-              std::fill(sum.begin(), sum.end(), 0.0);
-              double share = 0.0, outVar = 0.0;
-              forEachTap(x, y, [&](int kx, int ky, size_t j) {
-                const float wq = pairWeight(x, y, kx, ky, i, j);
-                if (wq <= 0.0f) return;
-                const double a = double(wq) / double(std::max(rowWeight[i], rowWeight[j]));
-                const float* q = src.pixels.data() + j * size_t(c);
-                for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += a * (double(q[ch]) - p[ch]);
-                share += a;
-                outVar += a * a * var[j];
-              });
-              float* out = dst.at(x, y);
-              for (int ch = 0; ch < c; ++ch)
-                out[ch] = clampAtZero ? float(std::max(0.0, double(p[ch]) + sum[size_t(ch)]))
-                                      : float(double(p[ch]) + sum[size_t(ch)]);
-              nextVar[i] = float(outVar + (1.0 - share) * (1.0 - share) * var[i]);
-            }
-          }
-        },
-        rows);
-    std::swap(src, dst);
-    std::swap(var, nextVar);
+  void run() {
+    estimateNoise();
+    input_ = page_.radiance;
+    page_.radiance = safeguarded(input_);
+    std::vector<float> div = divergenceOf(input_, page_.radiance, 2, safeguardedOp());
+    ObjectStep step = objectStep(page_.radiance, div);
+    if (trend_.any()) takeTrendWhereItGuaranteesMore(step, div);
+    applyShares(step);
+    restoreObjectSums(page_, input_);
   }
-  return src;
+
+ private:
+  // Per object, SURE's estimate of the noise the change out - input removes (G), the
+  // change's size (D), the estimate's spread, and the lower bound on G (applyShares).
+  struct ObjectStep {
+    std::vector<double> change, removed, spread, low;
   };
-  // The filter (on page.radiance or a perturbed copy): on the objects ObjectTrend covers,
-  // the fit plus the filtered residual, at least kTrendFloor of the texel's own value (so a
-  // texel > 0 never turns 0 or negative); elsewhere the passes alone.
-  const ObjectTrend trend(page);
-  const bool detrend = trend.any();
-  bool trendOn = false;
-  auto filter = [&](const Image& in) -> Image {
-    if (!trendOn) return filterPasses(in, true);
-    const Image fit = trend.fit(in);
+
+  // Noise standard deviation per texel (sigma_): from the given variance, or else a spatial
+  // estimate over the geometrically compatible valid 3x3 neighbours, as SVGF does without
+  // history; but robust: the median absolute deviation (x 1.4826, consistent for Gaussian
+  // noise) rather than the standard deviation, so that a texel beside a shadow edge, with at
+  // most 3 of its 9 neighbours across the edge, measures its own side's noise and not the
+  // step. Texels with fewer than three such texels get the page's mean estimate.
+  // Then checked_, the noise the safeguards judge the filter by: the given variance bounded
+  // by the texels' own spread (calibrateVariance). The filter's weights keep the variance as
+  // given: where it overstates the noise they mix more, and the safeguards, with the bounded
+  // variance, decide how much of that to keep.
+  void estimateNoise() {
+    sigma_.assign(n_, 0.0f);
+    if (!page_.variance.empty()) {
+      for (size_t i = 0; i < n_; ++i) sigma_[i] = std::sqrt(std::max(0.0f, page_.variance[i]));
+    } else {
+      std::vector<uint8_t> estimated(n_, 0);
+      g_.forEachValid(rows_, [&](int x, int y, size_t i) {
+        std::array<float, 9> lum;
+        int count = 0;
+        g_.forEachCompatible(x, y, 1, [&](size_t j) {
+          lum[size_t(count++)] =
+              texelLuminance(page_.radiance, int(j % size_t(w_)), int(j / size_t(w_)));
+        });
+        if (count < 3) return;
+        const float med = median(lum.data(), count);
+        for (int k = 0; k < count; ++k) lum[size_t(k)] = std::abs(lum[size_t(k)] - med);
+        sigma_[i] = kMadToSigma * median(lum.data(), count);
+        estimated[i] = 1;
+      });
+      double total = 0.0;
+      size_t count = 0;
+      for (size_t i = 0; i < n_; ++i)
+        if (estimated[i]) {
+          total += sigma_[i];
+          ++count;
+        }
+      const float mean = count ? float(total / double(count)) : 0.0f;
+      for (size_t i = 0; i < n_; ++i)
+        if (page_.valid[i] && !estimated[i]) sigma_[i] = mean;
+    }
+    checked_ = sigma_;
+    if (!page_.variance.empty()) calibrateVariance(g_, checked_);
+  }
+
+  // The à-trous passes over `in` (page.radiance, a perturbed copy or a residual): the
+  // filtered image. With clampAtZero false (a residual) values may be < 0.
+  Image filterPasses(const Image& in, bool clampAtZero) const {
+    const int w = w_, h = h_, c = c_;
+    const size_t n = n_;
+    const LightmapPage& page = page_;
+    const Guides& g = g_;
+    // Variance of each texel's current value, carried through the passes as SVGF does: a
+    // weighted mean with weights w has variance sum(w^2 var) / (sum w)^2 (neighbours taken as
+    // independent), so the luminance threshold shrinks as the noise does.
+    std::vector<float> var(n), nextVar(n, 0.0f);
+    for (size_t i = 0; i < n; ++i) var[i] = sigma_[i] * sigma_[i];
+    Image src = in, dst = in;
+    // Pair weight of texels p and q (q at a 5x5 à-trous tap of p), symmetric in p and q:
+    // B3 kernel x geometric guides (the smaller of the two directions) x a Gaussian in the
+    // luminance difference over its own standard error, sqrt(var_p + var_q): neighbours whose
+    // difference the noise explains mix, differences the noise does not explain (edges,
+    // gradients resolved by the samples) stop the filter. As the variance falls, so does every
+    // weight: the filter fades out where the estimate is already converged.
+    std::vector<float> lum(n, 0.0f), rowWeight(n, 0.0f);
+    for (int pass = 0; pass < settings_.iterations; ++pass) {
+      const int step = 1 << pass;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) lum[size_t(y) * w + x] = texelLuminance(src, x, y);
+      auto pairWeight = [&](int x, int y, int kx, int ky, size_t i, size_t j) -> float {
+        const int qx = x + (kx - 2) * step, qy = y + (ky - 2) * step;
+        float wq = kB3[kx] * kB3[ky];
+        wq *= std::min(g.geometric(x, y, qx, qy), g.geometric(qx, qy, x, y));
+        if (wq <= 0.0f) return 0.0f;
+        const float d = lum[j] - lum[i];
+        const float v = var[i] + var[j];
+        const float k = settings_.sigmaLuminance;
+        if (!(v > 0.0f)) return d == 0.0f ? wq : 0.0f;
+        return wq * std::exp(-0.5f * d * d / (k * k * v));
+      };
+      auto forEachTap = [&](int x, int y, auto&& f) {
+        const size_t i = size_t(y) * w + x;
+        for (int ky = 0; ky < 5; ++ky) {
+          const int qy = y + (ky - 2) * step;
+          if (qy < 0 || qy >= h) continue;
+          for (int kx = 0; kx < 5; ++kx) {
+            const int qx = x + (kx - 2) * step;
+            if (qx < 0 || qx >= w || (kx == 2 && ky == 2)) continue;
+            const size_t j = size_t(qy) * w + qx;
+            if (!page.valid[j] || !g.sameObject(i, j)) continue;
+            f(kx, ky, j);
+          }
+        }
+      };
+      // Each texel's total weight (its own B3 weight included).
+      parallelFor(
+          size_t(h),
+          [&](size_t begin, size_t end) {
+            for (size_t yy = begin; yy < end; ++yy)
+              for (int x = 0; x < w; ++x) {
+                const int y = int(yy);
+                const size_t i = size_t(y) * w + x;
+                if (!page.valid[i]) continue;
+                double total = double(kB3[2]) * kB3[2];
+                forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                  total += pairWeight(x, y, kx, ky, i, j);
+                });
+                rowWeight[i] = float(total);
+              }
+          },
+          rows_);
+      // out_p = x_p + sum_q a_pq (x_q - x_p), a_pq = w_pq / max(W_p, W_q): a is symmetric, so
+      // the texels' sum (their mean) is kept exactly, and sum_q a_pq < 1, so out_p is a convex
+      // combination of non-negative values with a positive share of x_p: never negative, and
+      // never 0 where x_p > 0.
+      parallelFor(
+          size_t(h),
+          [&](size_t begin, size_t end) {
+            std::vector<double> sum(static_cast<size_t>(c));
+            for (size_t yy = begin; yy < end; ++yy) {
+              const int y = int(yy);
+              for (int x = 0; x < w; ++x) {
+                const size_t i = size_t(y) * w + x;
+                if (!page.valid[i]) continue;  // dst already holds the input value
+                const float* p = src.at(x, y);
+                std::fill(sum.begin(), sum.end(), 0.0);
+                double share = 0.0, outVar = 0.0;
+                forEachTap(x, y, [&](int kx, int ky, size_t j) {
+                  const float wq = pairWeight(x, y, kx, ky, i, j);
+                  if (wq <= 0.0f) return;
+                  const double a = double(wq) / double(std::max(rowWeight[i], rowWeight[j]));
+                  const float* q = src.pixels.data() + j * size_t(c);
+                  for (int ch = 0; ch < c; ++ch) sum[size_t(ch)] += a * (double(q[ch]) - p[ch]);
+                  share += a;
+                  outVar += a * a * var[j];
+                });
+                float* out = dst.at(x, y);
+                for (int ch = 0; ch < c; ++ch)
+                  out[ch] = clampAtZero ? float(std::max(0.0, double(p[ch]) + sum[size_t(ch)]))
+                                        : float(double(p[ch]) + sum[size_t(ch)]);
+                nextVar[i] = float(outVar + (1.0 - share) * (1.0 - share) * var[i]);
+              }
+            }
+          },
+          rows_);
+      std::swap(src, dst);
+      std::swap(var, nextVar);
+    }
+    return src;
+  }
+
+  // The filter (on page.radiance or a perturbed copy): with trendOn_, on the objects
+  // ObjectTrend covers, the fit plus the filtered residual, at least kTrendFloor of the
+  // texel's own value (so a texel > 0 never turns 0 or negative); elsewhere the passes alone.
+  Image filter(const Image& in) const {
+    if (!trendOn_) return filterPasses(in, true);
+    const Image fit = trend_.fit(in);
     Image residual = in;
     for (size_t k = 0; k < residual.pixels.size(); ++k) residual.pixels[k] -= fit.pixels[k];
     Image out = filterPasses(residual, false);
-    for (size_t i = 0; i < n; ++i) {
-      if (!page.valid[i]) continue;
-      const bool fitted = trend.covers(i);
-      for (int ch = 0; ch < c; ++ch) {
-        const size_t k = i * size_t(c) + size_t(ch);
+    for (size_t i = 0; i < n_; ++i) {
+      if (!page_.valid[i]) continue;
+      const bool fitted = trend_.covers(i);
+      for (int ch = 0; ch < c_; ++ch) {
+        const size_t k = i * size_t(c_) + size_t(ch);
         out.pixels[k] = fitted ? std::max(out.pixels[k] + fit.pixels[k],
                                           kTrendFloor * std::max(in.pixels[k], 0.0f))
                                : std::max(out.pixels[k], 0.0f);
       }
     }
     return out;
-  };
+  }
 
   // The divergence of an operator `op` on the page, d op(x)_p / d x_p, by a Monte-Carlo
   // perturbation (Ramani et al. 2008, "Monte-Carlo SURE"): every texel's luminance moves by
@@ -841,43 +868,46 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   // op(x)_p) / eps_p estimates it (the cross terms b_p b_q d op_p / d x_q average out over
   // a window). eps_p is a small fraction of the texel's noise, where the weights'
   // dependence on the values lives.
-  auto divergenceOf = [&](const Image& in, const Image& out, uint64_t salt, auto&& op) {
+  template <typename Op>
+  std::vector<float> divergenceOf(const Image& in, const Image& out, uint64_t salt,
+                                  const Op& op) const {
     Image perturbed = in;
-    std::vector<float> eps(n, 0.0f), div(n, 0.0f);
-    for (size_t i = 0; i < n; ++i) {
-      if (!page.valid[i]) continue;
-      const float x = texelLuminance(in, int(i % size_t(w)), int(i / size_t(w)));
-      eps[i] = std::max(kDivergenceStep * sigma[i], 1e-5f * std::max(x, 1e-3f));
+    std::vector<float> eps(n_, 0.0f), div(n_, 0.0f);
+    for (size_t i = 0; i < n_; ++i) {
+      if (!page_.valid[i]) continue;
+      const float x = texelLuminance(in, int(i % size_t(w_)), int(i / size_t(w_)));
+      eps[i] = std::max(kDivergenceStep * sigma_[i], 1e-5f * std::max(x, 1e-3f));
       if (mixBits(hashValues(salt, i)) & 1) eps[i] = -eps[i];
-      for (int ch = 0; ch < std::min(c, 3); ++ch)
-        perturbed.pixels[i * size_t(c) + size_t(ch)] += eps[i];
+      for (int ch = 0; ch < std::min(c_, 3); ++ch)
+        perturbed.pixels[i * size_t(c_) + size_t(ch)] += eps[i];
     }
     const Image moved = op(perturbed);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const size_t i = size_t(y) * w + x;
-        if (page.valid[i])
+    for (int y = 0; y < h_; ++y)
+      for (int x = 0; x < w_; ++x) {
+        const size_t i = size_t(y) * w_ + x;
+        if (page_.valid[i])
           div[i] = (texelLuminance(moved, x, y) - texelLuminance(out, x, y)) / eps[i];
       }
     return div;
-  };
+  }
+
   // The filter, then the per-texel safeguard (safeguardWeights) on `in`.
-  auto safeguarded = [&](const Image& in) {
+  Image safeguarded(const Image& in) const {
     const Image filtered = filter(in);
     const std::vector<float> blend = safeguardWeights(
-        g, in, filtered, checked, divergenceOf(in, filtered, 1, filter), rows);
+        g_, in, filtered, checked_,
+        divergenceOf(in, filtered, 1, [this](const Image& x) { return filter(x); }), rows_);
     Image out = in;
-    for (size_t i = 0; i < n; ++i) {
-      const float a = settings.strength * blend[i];
-      for (int ch = 0; ch < c; ++ch) {
-        const size_t k = i * size_t(c) + size_t(ch);
+    for (size_t i = 0; i < n_; ++i) {
+      const float a = settings_.strength * blend[i];
+      for (int ch = 0; ch < c_; ++ch) {
+        const size_t k = i * size_t(c_) + size_t(ch);
         out.pixels[k] = in.pixels[k] + a * (filtered.pixels[k] - in.pixels[k]);
       }
     }
     return out;
-  };
-  const Image input = page.radiance;
-  page.radiance = safeguarded(input);
+  }
+
   // Per object, how much of the change d = out - x to keep: out_a = x + a d, a in [0, 1].
   // With raw error e, the realised change of the squared error (over the colour channels:
   // the error a reader of the lightmap sees; luminance alone misses colour the filter blurs
@@ -898,37 +928,31 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
   // keeps its raw texels. The old rule (keep the whole change when G - D exceeds the margin
   // x spread, else raw) took a = 1 on objects whose realised G fell below D, and lost (7 of
   // 64 Cornell seeds at 64 samples, worst +1.15%; docs/charts.md).
-  const int32_t objects = objectCount(page);
-  // Per object, SURE's estimate of the noise the change out - input removes (G), the
-  // change's size (D), the estimate's spread, the margin and its lower bound on G.
-  struct ObjectStep {
-    std::vector<double> change, removed, spread, low;
-  };
-  auto objectStep = [&](const Image& out, const std::vector<float>& div) {
+  ObjectStep objectStep(const Image& out, const std::vector<float>& div) const {
     ObjectStep st;
-    st.change.assign(size_t(objects), 0.0);
-    st.removed.assign(size_t(objects), 0.0);
-    st.spread.assign(size_t(objects), 0.0);
-    st.low.assign(size_t(objects), 0.0);
-    std::vector<double> texels(size_t(objects), 0.0), noise(size_t(objects), 0.0),
-        light(size_t(objects), 0.0);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const size_t i = size_t(y) * w + x;
-        const int32_t object = texelObject(page, i);
-        if (!page.valid[i] || object < 0) continue;
+    st.change.assign(size_t(objects_), 0.0);
+    st.removed.assign(size_t(objects_), 0.0);
+    st.spread.assign(size_t(objects_), 0.0);
+    st.low.assign(size_t(objects_), 0.0);
+    std::vector<double> texels(size_t(objects_), 0.0), noise(size_t(objects_), 0.0),
+        light(size_t(objects_), 0.0);
+    for (int y = 0; y < h_; ++y)
+      for (int x = 0; x < w_; ++x) {
+        const size_t i = size_t(y) * w_ + x;
+        const int32_t object = texelObject(page_, i);
+        if (!page_.valid[i] || object < 0) continue;
         const size_t o = size_t(object);
-        const float* o3 = out.pixels.data() + i * size_t(c);
-        const float* raw = input.pixels.data() + i * size_t(c);
-        const double var = double(checked[i]) * checked[i];
-        const double d2 = colourDistance2(out, input, i);
+        const float* o3 = out.pixels.data() + i * size_t(c_);
+        const float* raw = input_.pixels.data() + i * size_t(c_);
+        const double var = double(checked_[i]) * checked_[i];
+        const double d2 = colourDistance2(out, input_, i);
         const double gain = 2.0 * var * colourVarianceFactor(out, i) * (1.0 - double(div[i]));
         // SURE's per-texel term of the risk change at a = 1, d^2 - gain: its spread.
         const double t = d2 - gain;
         // 4 var_c d_c^2: the variance of 2 e d, the part of the realised gain SURE averages.
         const float l = texelLuminance(out, x, y);
         double realised = 0.0;
-        for (int ch = 0; ch < std::min(c, 3); ++ch) {
+        for (int ch = 0; ch < std::min(c_, 3); ++ch) {
           const double share = l > 0.0f ? double(o3[ch]) / l : 1.0;
           const double d = double(o3[ch]) - raw[ch];
           realised += 4.0 * var * share * share * d * d;
@@ -937,14 +961,14 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
         st.removed[o] += gain;
         st.spread[o] += t * t + realised;
         texels[o] += 1.0;
-        const double lr = texelLuminance(input, x, y);
+        const double lr = texelLuminance(input_, x, y);
         noise[o] += var;
         light[o] += lr * lr;
       }
     // The margin: kObjectMargin for a noisy object, rising to kConvergedMargin as its
     // relative noise sqrt(sum var / sum l^2) falls from kNoisy to kConverged; always
     // kConvergedMargin for an object of fewer than kReliableTexels texels.
-    for (size_t o = 0; o < size_t(objects); ++o) {
+    for (size_t o = 0; o < size_t(objects_); ++o) {
       const double relative = light[o] > 0.0 ? std::sqrt(noise[o] / light[o]) : 1.0;
       const double u = texels[o] < kReliableTexels
                            ? 1.0
@@ -953,34 +977,40 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
       st.low[o] = st.removed[o] - margin * std::sqrt(st.spread[o]);
     }
     return st;
-  };
-  // The gain the share rule below guarantees an object (its lower bound at the share it
-  // takes): low^2 / (4 D) where low > 0, else 0.
-  auto guaranteed = [](const ObjectStep& st, size_t o) {
+  }
+
+  // safeguarded as a callable, for divergenceOf.
+  std::function<Image(const Image&)> safeguardedOp() const {
+    return [this](const Image& x) { return safeguarded(x); };
+  }
+
+  // The gain the share rule guarantees an object (its lower bound at the share it takes):
+  // low^2 / (4 D) where low > 0, else 0.
+  static double guaranteed(const ObjectStep& st, size_t o) {
     return st.low[o] > 0.0 && st.change[o] > 0.0 ? st.low[o] * st.low[o] / (4.0 * st.change[o])
                                                  : 0.0;
-  };
-  std::vector<float> div = divergenceOf(input, page.radiance, 2, safeguarded);
-  ObjectStep step = objectStep(page.radiance, div);
-  if (detrend) {
-    // The same with the trend (ObjectTrend); each object keeps the candidate whose
-    // guaranteed gain is larger.
-    trendOn = true;
-    const Image withTrend = safeguarded(input);
-    const std::vector<float> divTrend = divergenceOf(input, withTrend, 2, safeguarded);
-    trendOn = false;
+  }
+
+  // The same chain with the trend (ObjectTrend); each object keeps the candidate whose
+  // guaranteed gain is larger: its texels in page.radiance, its divergence and its step.
+  void takeTrendWhereItGuaranteesMore(ObjectStep& step, std::vector<float>& div) {
+    trendOn_ = true;
+    const Image withTrend = safeguarded(input_);
+    const std::vector<float> divTrend = divergenceOf(input_, withTrend, 2, safeguardedOp());
+    trendOn_ = false;
     const ObjectStep stepTrend = objectStep(withTrend, divTrend);
-    std::vector<uint8_t> pick(size_t(objects), 0);
-    for (size_t o = 0; o < size_t(objects); ++o)
+    std::vector<uint8_t> pick(size_t(objects_), 0);
+    for (size_t o = 0; o < size_t(objects_); ++o)
       pick[o] = guaranteed(stepTrend, o) > guaranteed(step, o) ? 1 : 0;
-    for (size_t i = 0; i < n; ++i) {
-      const int32_t object = texelObject(page, i);
-      if (!page.valid[i] || object < 0 || !pick[size_t(object)]) continue;
+    for (size_t i = 0; i < n_; ++i) {
+      const int32_t object = texelObject(page_, i);
+      if (!page_.valid[i] || object < 0 || !pick[size_t(object)]) continue;
       div[i] = divTrend[i];
-      for (int ch = 0; ch < c; ++ch)
-        page.radiance.pixels[i * size_t(c) + size_t(ch)] = withTrend.pixels[i * size_t(c) + size_t(ch)];
+      for (int ch = 0; ch < c_; ++ch)
+        page_.radiance.pixels[i * size_t(c_) + size_t(ch)] =
+            withTrend.pixels[i * size_t(c_) + size_t(ch)];
     }
-    for (size_t o = 0; o < size_t(objects); ++o)
+    for (size_t o = 0; o < size_t(objects_); ++o)
       if (pick[o]) {
         step.change[o] = stepTrend.change[o];
         step.removed[o] = stepTrend.removed[o];
@@ -988,22 +1018,55 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
         step.low[o] = stepTrend.low[o];
       }
   }
-  // The share a.
-  std::vector<double> share(size_t(objects), 0.0);
-  for (size_t o = 0; o < size_t(objects); ++o)
-    share[o] = step.change[o] > 0.0 ? std::clamp(step.low[o] / (2.0 * step.change[o]), 0.0, 1.0)
-                                     : 0.0;
-  for (size_t i = 0; i < n; ++i) {
-    const int32_t object = texelObject(page, i);
-    if (!page.valid[i] || object < 0) continue;
-    const double a = share[size_t(object)];
-    for (int ch = 0; ch < c; ++ch) {
-      const size_t k = i * size_t(c) + size_t(ch);
-      page.radiance.pixels[k] =
-          float(double(input.pixels[k]) + a * (double(page.radiance.pixels[k]) - input.pixels[k]));
+
+  // Each object keeps the share a = low / (2 D) in [0, 1] of its change (objectStep).
+  void applyShares(const ObjectStep& step) {
+    std::vector<double> share(size_t(objects_), 0.0);
+    for (size_t o = 0; o < size_t(objects_); ++o)
+      share[o] =
+          step.change[o] > 0.0 ? std::clamp(step.low[o] / (2.0 * step.change[o]), 0.0, 1.0) : 0.0;
+    for (size_t i = 0; i < n_; ++i) {
+      const int32_t object = texelObject(page_, i);
+      if (!page_.valid[i] || object < 0) continue;
+      const double a = share[size_t(object)];
+      for (int ch = 0; ch < c_; ++ch) {
+        const size_t k = i * size_t(c_) + size_t(ch);
+        page_.radiance.pixels[k] = float(double(input_.pixels[k]) +
+                                         a * (double(page_.radiance.pixels[k]) - input_.pixels[k]));
+      }
     }
   }
-  restoreObjectSums(page, input);
+
+  LightmapPage& page_;
+  const DenoiseSettings& settings_;
+  const int w_, h_, c_;
+  const size_t n_;
+  Guides g_;
+  const ParallelOptions rows_;
+  const ObjectTrend trend_;
+  const int32_t objects_;
+  bool trendOn_ = false;
+  std::vector<float> sigma_, checked_;
+  Image input_;  // the page's radiance before denoising
+};
+
+}  // namespace
+
+void denoise(LightmapPage& page, const DenoiseSettings& settings) {
+  const int w = page.width(), h = page.height();
+  const size_t n = page.texelCount();
+  assert(page.valid.size() == n);
+  assert(page.objectId.empty() || page.objectId.size() == n);
+  assert(page.normal.empty() ||
+         (page.normal.width == w && page.normal.height == h && page.normal.channels >= 3));
+  assert(page.position.empty() ||
+         (page.position.width == w && page.position.height == h && page.position.channels >= 3));
+  assert(page.variance.empty() || page.variance.size() == n);
+  assert(page.texelWorldSize.empty() || page.texelWorldSize.size() == n);
+  (void)w;
+  (void)h;
+  if (settings.strength <= 0.0f || settings.iterations <= 0 || n == 0) return;
+  Denoiser(page, settings).run();
 }
 
 }  // namespace kiln
