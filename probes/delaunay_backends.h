@@ -36,6 +36,9 @@ struct Tetrahedralization {
   std::vector<BackendTet> tets;
   std::vector<int32_t> vertices;
   bool positive = false;
+  // Every vertex of `vertices` is a vertex of some tetrahedron (CGAL: each finite vertex of a
+  // 3D triangulation has finite cells around it), so the caller need not mark the used ones.
+  bool everyVertexUsed = false;
 };
 using Triangles = std::vector<std::array<int32_t, 3>>;
 

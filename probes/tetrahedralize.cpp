@@ -311,7 +311,43 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   const CurveKeys curve(lo, hi);
   int flat = 0;
   size_t hullFaces = 0;
-  for (size_t r = 0; r < tets.size(); ++r) {
+  if (raw->positive) {
+    // The same without branches on the data (CGAL: no flat tetrahedra, the orientation from
+    // the permutation's parity): the swap of the last two was a branch taken for half of the
+    // tetrahedra at random, a misprediction every other tetrahedron.
+    for (size_t r = 0; r < tets.size(); ++r) {
+      detail::BackendTet& t = tets[r];
+      uint32_t w[4];
+      for (int k = 0; k < 4; ++k) {
+        w[k] = uint32_t(probeOf[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
+      }
+      auto exchange = [&](int i, int j) {
+        const uint32_t a = std::min(w[i], w[j]), b = std::max(w[i], w[j]);
+        w[i] = a;
+        w[j] = b;
+      };
+      exchange(0, 1);
+      exchange(2, 3);
+      exchange(0, 2);
+      exchange(1, 3);
+      exchange(1, 2);
+      const uint32_t s0 = w[0] & 3, s1 = w[1] & 3, s2 = w[2] & 3, s3 = w[3] & 3;
+      const uint32_t inversions = uint32_t(s0 > s1) + uint32_t(s0 > s2) + uint32_t(s0 > s3) +
+                                  uint32_t(s1 > s2) + uint32_t(s1 > s3) + uint32_t(s2 > s3);
+      // The key's centroid sums the positions in the sorted order, before the swap.
+      const glm::vec3 a = Q[size_t(t.v[s0])], b = Q[size_t(t.v[s1])], c = Q[size_t(t.v[s2])],
+                      d = Q[size_t(t.v[s3])];
+      const uint32_t swap = (s2 ^ s3) & (0u - (inversions & 1));  // odd: swap the last two
+      const uint32_t u2 = s2 ^ swap, u3 = s3 ^ swap;
+      const std::array<int32_t, 4> v = t.v, n = t.n;
+      t.v = {v[s0], v[s1], v[u2], v[u3]};
+      t.n = {n[s0], n[s1], n[u2], n[u3]};
+      hullFaces += size_t(t.n[0] < 0) + size_t(t.n[1] < 0) + size_t(t.n[2] < 0) +
+                   size_t(t.n[3] < 0);
+      words.push_back((uint64_t(curve.of(a, b, c, d)) << 32) | r);
+    }
+  }
+  for (size_t r = 0; r < tets.size() && !raw->positive; ++r) {
     detail::BackendTet& t = tets[r];
     // Probe index and slot in one word (indices < 2^30, checked by the caller), sorted by a
     // network of five compare-exchanges (min / max, no branches on the data).
@@ -383,7 +419,10 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     return FaceRef{f, c, k};
   };
   auto face = [&](int32_t c, int k) { return faceOf(s.cells[size_t(c)], c, k); };
-  std::vector<int32_t> used(vertexCount, 0);  // per backend vertex
+  // Per backend vertex, 1 once a tetrahedron has it; not kept when the backend says every
+  // vertex has one (CGAL), which spares pass 2 four scattered stores per tetrahedron.
+  const bool markUsed = !raw->everyVertexUsed;
+  std::vector<int32_t> used(markUsed ? vertexCount : 0, 0);
   std::vector<FaceRef> hull;
   reserveOnHugePages(s.cells, size_t(inner) + hullFaces);
   reserveOnHugePages(s.neighbours, size_t(inner) + hullFaces);
@@ -423,7 +462,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       // than the probes' order); replaced by the probes after.
       s.cells.push_back(glm::ivec4(t.v[0], t.v[1], t.v[2], t.v[3]));
       for (int k = 0; k < 4; ++k) {
-        used[size_t(t.v[size_t(k)])] = 1;
+        if (markUsed) used[size_t(t.v[size_t(k)])] = 1;
         if (t.n[size_t(k)] >= 0) {
           links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
@@ -459,7 +498,9 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
       s.cells.push_back(glm::ivec4(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
                                    probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]));
-      for (int k = 0; k < 4; ++k) used[size_t(t.v[size_t(k)])] = 1;
+      for (int k = 0; k < 4; ++k) {
+        if (markUsed) used[size_t(t.v[size_t(k)])] = 1;
+      }
     }
     s.neighbours.assign(size_t(inner), glm::ivec4(-1));
     std::vector<FaceRef> refs;
@@ -475,7 +516,11 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   // Every backend vertex is a distinct representative probe, so the unused ones are the
   // representatives minus the vertices some tetrahedron has.
   int unused = int(reps.size());
-  for (int32_t u : used) unused -= u;
+  if (markUsed) {
+    for (int32_t u : used) unused -= u;
+  } else {
+    unused -= int(vertexCount);
+  }
   if (unused > 0) {
     ctx.warn(std::to_string(unused) + " probes are in no tetrahedron (dropped by the backend)");
   }

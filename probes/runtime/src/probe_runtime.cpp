@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 
@@ -958,14 +959,31 @@ inline V4i notNormal(V4f x) {
 }
 
 // Records for cells[0..3] into out[0..3]; returns a mask of the lanes left to walkRecord.
+// The positions go into lanes, and the records out of them, by 4 x 4 transposes in SSE
+// registers: filling a vector lane by lane went through the stack, four narrow stores and one
+// wide load per vector, a failed store forward each (only data movement: the values are the
+// same bits).
+inline __m128 loadPosition(const glm::vec3& p) {  // (x, y, z, 0), reading only the vec3
+  const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x)));
+  return _mm_movelh_ps(xy, _mm_load_ss(&p.z));
+}
+
 unsigned walkRecords4(const glm::vec3* positions, const glm::ivec4* cells, ProbeWalkCell* out) {
   V3 v[4];
+  __m128 origin[3];  // vertex 0's coordinates as floats, lane l = cell l
   for (int j = 0; j < 4; ++j) {
-    for (int l = 0; l < 4; ++l) {
-      const glm::vec3 p = positions[size_t(cells[l][j])];
-      v[j].x[l] = double(p.x);
-      v[j].y[l] = double(p.y);
-      v[j].z[l] = double(p.z);
+    __m128 r0 = loadPosition(positions[size_t(cells[0][j])]);
+    __m128 r1 = loadPosition(positions[size_t(cells[1][j])]);
+    __m128 r2 = loadPosition(positions[size_t(cells[2][j])]);
+    __m128 r3 = loadPosition(positions[size_t(cells[3][j])]);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);  // r0 = the four x, r1 the y, r2 the z
+    v[j].x = V4d(_mm256_cvtps_pd(r0));
+    v[j].y = V4d(_mm256_cvtps_pd(r1));
+    v[j].z = V4d(_mm256_cvtps_pd(r2));
+    if (j == 0) {
+      origin[0] = r0;
+      origin[1] = r1;
+      origin[2] = r2;
     }
   }
   V4l bad{};
@@ -1006,20 +1024,32 @@ unsigned walkRecords4(const glm::vec3* positions, const glm::ivec4* cells, Probe
                                                              bound, V4i)));
   const V4i tight = __builtin_convertvector(sumT * double(kUnitRoundoff) <= 0x1p-10, V4i);
   inside = tight ? inside : V4f{} + std::numeric_limits<float>::infinity();
+  // Every lane's record is written; the caller overwrites the ones in the returned mask.
+  static_assert(offsetof(ProbeWalkCell, y) == 16 && offsetof(ProbeWalkCell, z) == 32 &&
+                offsetof(ProbeWalkCell, origin) == 48 && offsetof(ProbeWalkCell, inside) == 60);
+  for (int a = 0; a < 3; ++a) {  // row l of the transpose = lane l's x (y, z) of l_0..l_3
+    __m128 r0 = __m128(g[0][a]), r1 = __m128(g[1][a]), r2 = __m128(g[2][a]),
+           r3 = __m128(g[3][a]);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+    auto row = [&](int l) {
+      return a == 0 ? out[l].x.data() : a == 1 ? out[l].y.data() : out[l].z.data();
+    };
+    _mm_storeu_ps(row(0), r0);
+    _mm_storeu_ps(row(1), r1);
+    _mm_storeu_ps(row(2), r2);
+    _mm_storeu_ps(row(3), r3);
+  }
+  {
+    __m128 r0 = origin[0], r1 = origin[1], r2 = origin[2], r3 = __m128(inside);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);  // row l = (origin of cell l, its inside)
+    _mm_storeu_ps(&out[0].origin.x, r0);
+    _mm_storeu_ps(&out[1].origin.x, r1);
+    _mm_storeu_ps(&out[2].origin.x, r2);
+    _mm_storeu_ps(&out[3].origin.x, r3);
+  }
   unsigned left = 0;
   for (int l = 0; l < 4; ++l) {
-    if (bad[l] != 0 || badFloat[l] != 0) {
-      left |= 1u << l;
-      continue;
-    }
-    ProbeWalkCell& w = out[l];
-    w.origin = glm::vec3(float(v[0].x[l]), float(v[0].y[l]), float(v[0].z[l]));
-    for (int k = 0; k < 4; ++k) {
-      w.x[size_t(k)] = g[k][0][l];
-      w.y[size_t(k)] = g[k][1][l];
-      w.z[size_t(k)] = g[k][2][l];
-    }
-    w.inside = inside[l];
+    if (bad[l] != 0 || badFloat[l] != 0) left |= 1u << l;
   }
   return left;
 }
