@@ -311,43 +311,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   const CurveKeys curve(lo, hi);
   int flat = 0;
   size_t hullFaces = 0;
-  if (raw->positive) {
-    // The same without branches on the data (CGAL: no flat tetrahedra, the orientation from
-    // the permutation's parity): the swap of the last two was a branch taken for half of the
-    // tetrahedra at random, a misprediction every other tetrahedron.
-    for (size_t r = 0; r < tets.size(); ++r) {
-      detail::BackendTet& t = tets[r];
-      uint32_t w[4];
-      for (int k = 0; k < 4; ++k) {
-        w[k] = uint32_t(probeOf[size_t(t.v[size_t(k)])]) << 2 | uint32_t(k);
-      }
-      auto exchange = [&](int i, int j) {
-        const uint32_t a = std::min(w[i], w[j]), b = std::max(w[i], w[j]);
-        w[i] = a;
-        w[j] = b;
-      };
-      exchange(0, 1);
-      exchange(2, 3);
-      exchange(0, 2);
-      exchange(1, 3);
-      exchange(1, 2);
-      const uint32_t s0 = w[0] & 3, s1 = w[1] & 3, s2 = w[2] & 3, s3 = w[3] & 3;
-      const uint32_t inversions = uint32_t(s0 > s1) + uint32_t(s0 > s2) + uint32_t(s0 > s3) +
-                                  uint32_t(s1 > s2) + uint32_t(s1 > s3) + uint32_t(s2 > s3);
-      // The key's centroid sums the positions in the sorted order, before the swap.
-      const glm::vec3 a = Q[size_t(t.v[s0])], b = Q[size_t(t.v[s1])], c = Q[size_t(t.v[s2])],
-                      d = Q[size_t(t.v[s3])];
-      const uint32_t swap = (s2 ^ s3) & (0u - (inversions & 1));  // odd: swap the last two
-      const uint32_t u2 = s2 ^ swap, u3 = s3 ^ swap;
-      const std::array<int32_t, 4> v = t.v, n = t.n;
-      t.v = {v[s0], v[s1], v[u2], v[u3]};
-      t.n = {n[s0], n[s1], n[u2], n[u3]};
-      hullFaces += size_t(t.n[0] < 0) + size_t(t.n[1] < 0) + size_t(t.n[2] < 0) +
-                   size_t(t.n[3] < 0);
-      words.push_back((uint64_t(curve.of(a, b, c, d)) << 32) | r);
-    }
-  }
-  for (size_t r = 0; r < tets.size() && !raw->positive; ++r) {
+  for (size_t r = 0; r < tets.size(); ++r) {
     detail::BackendTet& t = tets[r];
     // Probe index and slot in one word (indices < 2^30, checked by the caller), sorted by a
     // network of five compare-exchanges (min / max, no branches on the data).
