@@ -9,7 +9,6 @@
 #include <array>
 #include <cassert>
 #include <cmath>
-#include <functional>
 
 #include "src/sampling.h"
 
@@ -675,8 +674,8 @@ class Denoiser {
   void run() {
     estimateNoise();
     input_ = page_.radiance;
-    page_.radiance = safeguarded(input_);
-    std::vector<float> div = divergenceOf(input_, page_.radiance, 2, safeguardedOp());
+    page_.radiance = safeguarded(input_, false);
+    std::vector<float> div = chainDivergence(page_.radiance, false);
     ObjectStep step = objectStep(page_.radiance, div);
     if (trend_.any()) takeTrendWhereItGuaranteesMore(step, div);
     applyShares(step);
@@ -840,11 +839,11 @@ class Denoiser {
     return src;
   }
 
-  // The filter (on page.radiance or a perturbed copy): with trendOn_, on the objects
+  // The filter (on page.radiance or a perturbed copy): with `trend`, on the objects
   // ObjectTrend covers, the fit plus the filtered residual, at least kTrendFloor of the
   // texel's own value (so a texel > 0 never turns 0 or negative); elsewhere the passes alone.
-  Image filter(const Image& in) const {
-    if (!trendOn_) return filterPasses(in, true);
+  Image filter(const Image& in, bool trend) const {
+    if (!trend) return filterPasses(in, true);
     const Image fit = trend_.fit(in);
     Image residual = in;
     for (size_t k = 0; k < residual.pixels.size(); ++k) residual.pixels[k] -= fit.pixels[k];
@@ -891,12 +890,13 @@ class Denoiser {
     return div;
   }
 
-  // The filter, then the per-texel safeguard (safeguardWeights) on `in`.
-  Image safeguarded(const Image& in) const {
-    const Image filtered = filter(in);
+  // The filter (with or without the trend), then the per-texel safeguard (safeguardWeights)
+  // on `in`.
+  Image safeguarded(const Image& in, bool trend) const {
+    const Image filtered = filter(in, trend);
     const std::vector<float> blend = safeguardWeights(
         g_, in, filtered, checked_,
-        divergenceOf(in, filtered, 1, [this](const Image& x) { return filter(x); }), rows_);
+        divergenceOf(in, filtered, 1, [&](const Image& x) { return filter(x, trend); }), rows_);
     Image out = in;
     for (size_t i = 0; i < n_; ++i) {
       const float a = settings_.strength * blend[i];
@@ -979,9 +979,9 @@ class Denoiser {
     return st;
   }
 
-  // safeguarded as a callable, for divergenceOf.
-  std::function<Image(const Image&)> safeguardedOp() const {
-    return [this](const Image& x) { return safeguarded(x); };
+  // The divergence of the whole filter-and-safeguard chain at the input, whose result is `out`.
+  std::vector<float> chainDivergence(const Image& out, bool trend) const {
+    return divergenceOf(input_, out, 2, [&](const Image& x) { return safeguarded(x, trend); });
   }
 
   // The gain the share rule guarantees an object (its lower bound at the share it takes):
@@ -994,10 +994,8 @@ class Denoiser {
   // The same chain with the trend (ObjectTrend); each object keeps the candidate whose
   // guaranteed gain is larger: its texels in page.radiance, its divergence and its step.
   void takeTrendWhereItGuaranteesMore(ObjectStep& step, std::vector<float>& div) {
-    trendOn_ = true;
-    const Image withTrend = safeguarded(input_);
-    const std::vector<float> divTrend = divergenceOf(input_, withTrend, 2, safeguardedOp());
-    trendOn_ = false;
+    const Image withTrend = safeguarded(input_, true);
+    const std::vector<float> divTrend = chainDivergence(withTrend, true);
     const ObjectStep stepTrend = objectStep(withTrend, divTrend);
     std::vector<uint8_t> pick(size_t(objects_), 0);
     for (size_t o = 0; o < size_t(objects_); ++o)
@@ -1045,7 +1043,6 @@ class Denoiser {
   const ParallelOptions rows_;
   const ObjectTrend trend_;
   const int32_t objects_;
-  bool trendOn_ = false;
   std::vector<float> sigma_, checked_;
   Image input_;  // the page's radiance before denoising
 };
@@ -1053,7 +1050,7 @@ class Denoiser {
 }  // namespace
 
 void denoise(LightmapPage& page, const DenoiseSettings& settings) {
-  const int w = page.width(), h = page.height();
+  [[maybe_unused]] const int w = page.width(), h = page.height();
   const size_t n = page.texelCount();
   assert(page.valid.size() == n);
   assert(page.objectId.empty() || page.objectId.size() == n);
@@ -1063,8 +1060,6 @@ void denoise(LightmapPage& page, const DenoiseSettings& settings) {
          (page.position.width == w && page.position.height == h && page.position.channels >= 3));
   assert(page.variance.empty() || page.variance.size() == n);
   assert(page.texelWorldSize.empty() || page.texelWorldSize.size() == n);
-  (void)w;
-  (void)h;
   if (settings.strength <= 0.0f || settings.iterations <= 0 || n == 0) return;
   Denoiser(page, settings).run();
 }
