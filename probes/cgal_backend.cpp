@@ -66,7 +66,6 @@ Result<Tetrahedralization> cgalDelaunay3(std::span<const glm::dvec3> points) {
     if (dt.dimension() != 3) {
       return Error{"CGAL: triangulation has dimension " + std::to_string(dt.dimension())};
     }
-    std::vector<Input>().swap(input);  // freed before the records are allocated
     // Number the vertices in memory order (their info becomes that number, the input index
     // goes to r.vertices), then read the finite cells in memory order in one pass, numbering
     // each as it is read: CGAL's neighbor(k) is opposite vertex(k), as the caller expects. A

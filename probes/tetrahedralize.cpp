@@ -219,9 +219,7 @@ uint32_t mortonIndex(uint32_t x, uint32_t y, uint32_t z) {
 // the triangulation alone (so both backends give the same ProbeSet), and cells near in space
 // are near in memory, so a walk's steps, the neighbour links and the seed grid's cells stay in
 // cache. A cell's key comes from CurveKeys::of in the pass that reads the backend's cells;
-// curveOrder sorts `words` into the new order: afterwards the low 32 bits of words[i] are the
-// index into `tets` of the cell at position i (no separate order array: one fewer 4-byte-per-
-// cell array to allocate and fill).
+// curveOrder returns, for each position of the new order, the index into `tets`.
 struct CurveKeys {
   glm::vec3 lo, scale;
   CurveKeys(dvec3 lo_, dvec3 hi_) : lo(lo_) {
@@ -238,47 +236,49 @@ struct CurveKeys {
 
 // `words` holds key << 32 | index into `tets` per cell; sorted in place. Tetrahedra hold
 // backend vertex numbers, probeOf maps them to probe indices.
-void curveOrder(std::vector<uint64_t>& words, const std::vector<detail::BackendTet>& tets,
-                const std::vector<int32_t>& probeOf) {
+std::vector<int32_t> curveOrder(std::vector<uint64_t>& words,
+                                const std::vector<detail::BackendTet>& tets,
+                                const std::vector<int32_t>& probeOf) {
   const size_t n = words.size();
-  {
-    std::vector<uint64_t> swap;
-    reserveOnHugePages(swap, n);
-    swap.resize(n);
-    // LSD radix sort on the 3 x kCurveBits key bits in three passes (stable): sorting the
-    // words sorts by key, ties by the backend's index. 10-bit digits keep each pass's counters
-    // and write positions in L1 (15-bit ones in two passes scatter over 32768 places).
-    constexpr int kDigit = 10;
-    constexpr int kPasses = 3;
-    static_assert(kPasses * kDigit >= 3 * kCurveBits);
-    std::vector<uint32_t> count((1u << kDigit) + 1);
-    for (int pass = 0; pass < kPasses; ++pass) {
-      const int shift = 32 + pass * kDigit;
-      std::fill(count.begin(), count.end(), 0u);
-      for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
-      for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
-      for (uint64_t w : words) swap[count[(w >> shift) & ((1u << kDigit) - 1)]++] = w;
-      words.swap(swap);
-    }
-  }  // the spare buffer is freed here, before the next pass allocates
+  std::vector<uint64_t> swap;
+  reserveOnHugePages(swap, n);
+  swap.resize(n);
+  // LSD radix sort on the 3 x kCurveBits key bits in three passes (stable): sorting the words
+  // sorts by key, ties by the backend's index. 10-bit digits keep each pass's counters and
+  // write positions in L1 (15-bit ones in two passes scatter over 32768 places).
+  constexpr int kDigit = 10;
+  constexpr int kPasses = 3;
+  static_assert(kPasses * kDigit >= 3 * kCurveBits);
+  std::vector<uint32_t> count((1u << kDigit) + 1);
+  for (int pass = 0; pass < kPasses; ++pass) {
+    const int shift = 32 + pass * kDigit;
+    std::fill(count.begin(), count.end(), 0u);
+    for (uint64_t w : words) ++count[((w >> shift) & ((1u << kDigit) - 1)) + 1];
+    for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
+    for (uint64_t w : words) swap[count[(w >> shift) & ((1u << kDigit) - 1)]++] = w;
+    words.swap(swap);
+  }
+  std::vector<int32_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = int32_t(uint32_t(words[i]));
   // Equal keys (cells sharing a curve cell) by probe indices, not by the backend's order.
   for (size_t i = 0; i < n;) {
     size_t j = i + 1;
     while (j < n && (words[j] >> 32) == (words[i] >> 32)) ++j;
     if (j - i > 1) {
-      std::sort(words.begin() + long(i), words.begin() + long(j), [&](uint64_t a, uint64_t b) {
-        const std::array<int32_t, 4>&u = tets[size_t(uint32_t(a))].v,
-                                     &v = tets[size_t(uint32_t(b))].v;
-        for (int k = 0; k < 4; ++k) {
-          const int32_t x = probeOf[size_t(u[size_t(k)])];
-          const int32_t y = probeOf[size_t(v[size_t(k)])];
-          if (x != y) return x < y;
-        }
-        return false;
-      });
+      std::sort(order.begin() + long(i), order.begin() + long(j),
+                [&](int32_t a, int32_t b) {
+                  const std::array<int32_t, 4>&u = tets[size_t(a)].v, &v = tets[size_t(b)].v;
+                  for (int k = 0; k < 4; ++k) {
+                    const int32_t x = probeOf[size_t(u[size_t(k)])];
+                    const int32_t y = probeOf[size_t(v[size_t(k)])];
+                    if (x != y) return x < y;
+                  }
+                  return false;
+                });
     }
     i = j;
   }
+  return order;
 }
 
 Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dvec3 lo,
@@ -291,11 +291,10 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
                                                ? detail::tetgenDelaunay3(pts)
                                                : detail::cgalDelaunay3(pts);
   if (!raw) return Error{raw.error()};
-  std::vector<dvec3>().swap(pts);  // the backend's input only
   ProbeSet s = emptySet(ctx, 3);
   // The backend's vertices, in its order: their probes and positions (read per tetrahedron
   // below; in the backend's spatial order they stay in cache, in the caller's they would not).
-  const size_t vertexCount = raw->vertices.empty() ? reps.size() : raw->vertices.size();
+  const size_t vertexCount = raw->vertices.empty() ? pts.size() : raw->vertices.size();
   std::vector<int32_t> probeOf(vertexCount);
   std::vector<glm::vec3> Q(vertexCount);
   for (size_t j = 0; j < vertexCount; ++j) {
@@ -365,10 +364,9 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   }
   if (flat > 0) ctx.warn(std::to_string(flat) + " flat tetrahedra from the backend dropped");
   if (words.empty()) return Error{"tetrahedralization produced no tetrahedra"};
-  curveOrder(words, tets, probeOf);
-  // words[i]'s low half: the index into `tets` of the cell at position i of the new order.
-  auto order = [&words](int32_t i) { return size_t(uint32_t(words[size_t(i)])); };
-  const int32_t inner = int32_t(words.size());
+  const std::vector<int32_t> order = curveOrder(words, tets, probeOf);
+  std::vector<uint64_t>().swap(words);
+  const int32_t inner = int32_t(order.size());
 
   // Pass 2, in the new order: the cells, the backend's neighbours renumbered (when every
   // tetrahedron was kept: dropping a flat one leaves its neighbours pointing at nothing, and
@@ -393,15 +391,8 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
   reserveOnHugePages(s.cells, size_t(inner) + hullFaces);
   reserveOnHugePages(s.neighbours, size_t(inner) + hullFaces);
   if (flat == 0) {
-    // Every tetrahedron was kept, so `words` has one entry per backend tetrahedron: its high
-    // half, the sort key until now, becomes the backend tetrahedron's position in the new
-    // order (words[r] >> 32 for tets[r]; the low halves keep the order), instead of a
-    // separate array.
-    for (int32_t i = 0; i < inner; ++i) {
-      uint64_t& w = words[order(i)];
-      w = (w & 0xffffffffu) | uint64_t(uint32_t(i)) << 32;
-    }
-    auto newIndex = [&words](int32_t r) { return int32_t(words[size_t(r)] >> 32); };
+    std::vector<int32_t> newIndex(tets.size());
+    for (int32_t i = 0; i < inner; ++i) newIndex[size_t(order[size_t(i)])] = i;
     hull.reserve(hullFaces);
     runtime_detail::SeedGridBuilder grid(s.positions, 3, inner, settings.cellsPerSeed);
     // The seed grid's offers are prepared kOfferAhead cells ahead (their record has arrived
@@ -409,7 +400,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     constexpr int32_t kOfferAhead = 8;
     runtime_detail::SeedGridBuilder::Offer offers[kOfferAhead];
     auto prepareOffer = [&](int32_t c) {
-      const detail::BackendTet& t = tets[order(c)];
+      const detail::BackendTet& t = tets[size_t(order[size_t(c)])];
       offers[c % kOfferAhead] = grid.prepare(
           c, ((Q[size_t(t.v[0])] + Q[size_t(t.v[1])]) + Q[size_t(t.v[2])]) + Q[size_t(t.v[3])]);
     };
@@ -420,15 +411,15 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       // ahead (by then that record has arrived), so that the misses overlap.
       constexpr int32_t kAhead = 16;
       static_assert(kOfferAhead <= kAhead / 2);
-      if (i + kAhead < inner) prefetch(&tets[order(i + kAhead)]);
+      if (i + kAhead < inner) prefetch(&tets[size_t(order[size_t(i + kAhead)])]);
       if (i + kAhead / 2 < inner) {
-        for (int32_t n : tets[order(i + kAhead / 2)].n) {
-          if (n >= 0) prefetch(&words[size_t(n)]);
+        for (int32_t n : tets[size_t(order[size_t(i + kAhead / 2)])].n) {
+          if (n >= 0) prefetch(&newIndex[size_t(n)]);
         }
       }
       const runtime_detail::SeedGridBuilder::Offer offer = offers[i % kOfferAhead];
       if (i + kOfferAhead < inner) prepareOffer(i + kOfferAhead);
-      const detail::BackendTet& t = tets[order(i)];
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
       glm::ivec4 links(-1);
       // The backend's vertex numbers for now: the walk records below read positions through
       // them (Q, in the backend's vertex order, which follows its spatial sort: fewer misses
@@ -437,7 +428,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       for (int k = 0; k < 4; ++k) {
         if (markUsed) used[size_t(t.v[size_t(k)])] = 1;
         if (t.n[size_t(k)] >= 0) {
-          links[k] = newIndex(t.n[size_t(k)]);
+          links[k] = newIndex[size_t(t.n[size_t(k)])];
         } else {
           const glm::ivec4 cell(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
                                 probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]);
@@ -447,11 +438,6 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
       s.neighbours.push_back(links);
       grid.commit(offer);
     }
-    // The backend's records and the order are no longer needed: freed before the walk array
-    // is allocated (26 MB at 100k probes off the build's peak; memory the allocator or the
-    // kernel can hand to the walk array instead of new pages).
-    std::vector<uint64_t>().swap(words);
-    std::vector<detail::BackendTet>().swap(tets);
     // The walk records (each a function of its four positions alone, so the same through Q),
     // made in batches that stay in L1 and appended: no zero-fill of the 43 MB array (at 100k
     // probes) before they are written.
@@ -473,7 +459,7 @@ Result<ProbeSet> build3(const Context& ctx, const std::vector<int32_t>& reps, dv
     s.grid = grid.finish();
   } else {
     for (int32_t i = 0; i < inner; ++i) {
-      const detail::BackendTet& t = tets[order(i)];
+      const detail::BackendTet& t = tets[size_t(order[size_t(i)])];
       s.cells.push_back(glm::ivec4(probeOf[size_t(t.v[0])], probeOf[size_t(t.v[1])],
                                    probeOf[size_t(t.v[2])], probeOf[size_t(t.v[3])]));
       for (int k = 0; k < 4; ++k) {
