@@ -51,6 +51,10 @@ inline constexpr float kMaxProbeCoordinate = 1e7f;
 // blending", says why).
 inline constexpr int32_t kDefaultVisibilityResolution = 32;
 
+// Largest ProbeBakeSettings::footprint: half the nearest-neighbour distance is where two
+// neighbours' balls touch.
+inline constexpr float kMaxProbeFootprint = 0.5f;
+
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
   uint64_t seed = 0;     // keys every random number: probe i uses hashValues(seed, i)
@@ -84,6 +88,15 @@ struct ProbeBakeSettings {
   // 32 x 32 (6 KB per probe): smaller texels leak at silhouettes (docs/probes.md, "Why these
   // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
+  // Footprint (spatial prefilter, docs/probes.md "Footprint"): each probe's radiance SH is the
+  // mean over a ball around it instead of the value at its centre. The ball's radius is
+  // footprint x the distance to the nearest other probe of the set, at most
+  // footprintMaxRadius; 0 = a point bake. Every ray (and every punctual-light sample) starts
+  // at its own deterministic point of the ball, pulled back from geometry between it and the
+  // probe; validity, the visibility map and the probe occlusion stay those of the centre.
+  // In [0, kMaxProbeFootprint].
+  float footprint = 0.0f;
+  float footprintMaxRadius = 0.5f;  // metres, > 0
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
   // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
@@ -152,9 +165,27 @@ struct ProbeSample {
   float validity = 1.0f;
   std::vector<uint16_t> visibility;  // resolution^2 x {mu, sigma, far} unorm16, or empty
 };
+// `footprintRadius` > 0 bakes the mean over a ball of that radius around p (see
+// ProbeBakeSettings::footprint): ray s starts at footprintOrigin(tracer, p, radius, key, s)
+// and one punctual-light evaluation is made per ray at that origin (instead of lightSamples
+// at p).
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr,
-                      const VisibilityMapSpec& visibility = {});
+                      const VisibilityMapSpec& visibility = {}, float footprintRadius = 0.0f);
+
+// Origin of ray s of a probe at p baked over a ball of `radius` (key as bakeProbe's): a
+// point of the ball (a Sobol point of sample s of a side stream of `key`, uniform in volume)
+// whose segment from p is free of geometry up to 1% of the radius beyond it; a blocked point
+// is re-drawn (up to 16 draws, the last then pulled back towards p to 1% of the radius short
+// of the surface), so origins are uniform over the part of the ball the probe sees.
+// p itself when radius <= 0. Deterministic.
+vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, uint32_t s);
+
+// Per position, the footprint radius bakeProbes uses: settings.footprint x the distance to
+// the nearest other position (positions at exactly the same point are not counted), at most
+// settings.footprintMaxRadius; 0 for a lone position or footprint 0. A uniform grid search.
+std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
+                                       const ProbeBakeSettings& settings);
 
 // Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
 // Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in
