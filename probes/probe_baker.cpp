@@ -238,6 +238,16 @@ std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
   return out;
 }
 
+float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings) {
+  Bounds3 bakedBounds;
+  for (const Object& o : scene.objects)
+    if (o.settings.isStatic)
+      for (const vec3& v : o.positions) bakedBounds.extend(v);
+  const float diagonal = bakedBounds.empty() ? 0.0f : glm::length(bakedBounds.max - bakedBounds.min);
+  return diagonal > 0.0f ? std::min(settings.footprintMaxRadius, kFootprintSceneFraction * diagonal)
+                         : settings.footprintMaxRadius;
+}
+
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel,
                       const VisibilityMapSpec& visibility, float footprintRadius) {
@@ -360,7 +370,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                               : 0;
   std::vector<uint16_t> moments(count * perProbe);
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
-  const std::vector<float> footprintRadius = probeFootprintRadii(positions, settings);
+  ProbeBakeSettings footprintSettings = settings;
+  footprintSettings.footprintMaxRadius = probeFootprintMaxRadius(scene, settings);
+  const std::vector<float> footprintRadius = probeFootprintRadii(positions, footprintSettings);
   ParallelOptions options;
   options.threads = settings.threads;
   options.grain = 1;  // a probe is thousands of paths: balance load probe by probe

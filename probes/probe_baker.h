@@ -54,6 +54,10 @@ inline constexpr int32_t kDefaultVisibilityResolution = 32;
 // Largest ProbeBakeSettings::footprint: half the nearest-neighbour distance is where two
 // neighbours' balls touch.
 inline constexpr float kMaxProbeFootprint = 0.5f;
+// A footprint's radius is at most this fraction of the diagonal of the static objects' bounds
+// (the 0.55 m Cornell box: 9.6 mm; the breakfast room, 6.7 m: 6.7 cm; the atrium: the
+// metre cap).
+inline constexpr float kFootprintSceneFraction = 0.01f;
 
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
@@ -88,15 +92,18 @@ struct ProbeBakeSettings {
   // 32 x 32 (6 KB per probe): smaller texels leak at silhouettes (docs/probes.md, "Why these
   // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
-  // Footprint (spatial prefilter, docs/probes.md "Footprint"): each probe's radiance SH is the
-  // mean over a ball around it instead of the value at its centre. The ball's radius is
-  // footprint x the distance to the nearest other probe of the set, at most
-  // footprintMaxRadius; 0 = a point bake. Every ray (and every punctual-light sample) starts
-  // at its own deterministic point of the ball, pulled back from geometry between it and the
-  // probe; validity, the visibility map and the probe occlusion stay those of the centre.
-  // In [0, kMaxProbeFootprint].
-  float footprint = 0.0f;
-  float footprintMaxRadius = 0.5f;  // metres, > 0
+  // Footprint (spatial prefilter, docs/probes.md "The footprint"): each probe's radiance SH
+  // is the mean over a ball around it instead of the value at its centre, so that light and
+  // shade finer than the probes (a sunbeam striped by a blind) is averaged instead of
+  // aliased. The ball's radius is footprint x the distance to the nearest other probe of the
+  // set, at most footprintMaxRadius and at most kFootprintSceneFraction of the diagonal of
+  // the static objects' bounds (probeFootprintMaxRadius); 0 = a point bake. Every ray (and
+  // every punctual-light sample) starts at its own deterministic point of the part of the ball
+  // the probe sees (footprintOrigin); validity, the visibility map and the probe occlusion
+  // stay those of the centre. In [0, kMaxProbeFootprint]. The defaults were chosen on the
+  // breakfast room, the atrium and the Cornell reference (docs/probe_placement.md, round 8).
+  float footprint = 0.5f;
+  float footprintMaxRadius = 0.1f;  // metres, > 0
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
   // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
@@ -127,7 +134,8 @@ IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSe
 
 // Bakes probes at `positions` (world space, metres). The ProbeSet has one probe per position
 // in the same order (near-duplicates merged by the topology keep their slot and get their
-// own SH), RADIANCE SH, and validity = 1 - (share of rays whose first hit is the back face
+// own SH), RADIANCE SH (each probe's the mean over its footprint ball when
+// settings.footprint > 0: radii from probeFootprintRadii with probeFootprintMaxRadius), and validity = 1 - (share of rays whose first hit is the back face
 // of a single-sided surface), the raw fraction in [0, 1] (1 = open space); occlusion per
 // probe (bakeProbeOcclusion; all 1 outside shadowmask mode) and occlusionLights from the plan.
 // Invalid probes that are filled get their valid neighbours' mean occlusion too. The plan's
@@ -181,11 +189,15 @@ ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32
 // p itself when radius <= 0. Deterministic.
 vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, uint32_t s);
 
-// Per position, the footprint radius bakeProbes uses: settings.footprint x the distance to
-// the nearest other position (positions at exactly the same point are not counted), at most
-// settings.footprintMaxRadius; 0 for a lone position or footprint 0. A uniform grid search.
+// Per position, settings.footprint x the distance to the nearest other position (positions
+// at exactly the same point are not counted), at most settings.footprintMaxRadius; 0 for a
+// lone position or footprint 0. A uniform grid search. bakeProbes passes settings with
+// footprintMaxRadius = probeFootprintMaxRadius(scene, settings).
 std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
                                        const ProbeBakeSettings& settings);
+// The largest footprint radius in `scene`: settings.footprintMaxRadius, at most
+// kFootprintSceneFraction of the diagonal of the static objects' bounds (when they have any).
+float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings);
 
 // Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
 // Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in

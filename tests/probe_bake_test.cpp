@@ -937,6 +937,10 @@ TEST(ProbesCli, BadUsageExitsTwo) {
     EXPECT_EQ(test::runCommand(bake + "--footprint " + bad, &log), 2) << bad << log;
     EXPECT_NE(log.find("--footprint"), std::string::npos) << log;
   }
+  for (const char* bad : {"0", "-1", "inf"}) {
+    EXPECT_EQ(test::runCommand(bake + "--footprint-max-radius " + bad, &log), 2) << bad << log;
+    EXPECT_NE(log.find("--footprint-max-radius"), std::string::npos) << log;
+  }
   EXPECT_EQ(test::runCommand(kiln() + "probes query x.kprobe 1 2 3 --blend linear", &log), 2)
       << log;
   EXPECT_EQ(test::runCommand(kiln() + "probes bake scene.gltf", &log), 2) << log;  // no --out
