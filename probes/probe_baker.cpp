@@ -16,6 +16,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <unordered_map>
 
 #include "src/distributed.h"
 #include "src/parallel.h"
@@ -29,6 +30,14 @@ namespace {
 
 constexpr uint64_t kLightsTag = 0x6c6967687473ull;       // "lights"
 constexpr uint64_t kOcclusionTag = 0x6f63636c75646eull;  // "occludn"
+constexpr uint64_t kFootprintTag = 0x666f6f74707274ull;  // "footprt"
+// A footprint origin stops this fraction of the radius short of the surface between it and
+// the probe.
+constexpr float kFootprintGap = 0.01f;
+// Draws of a footprint origin before the last is pulled back to the surface instead: re-drawn
+// points are uniform over the part of the ball the probe sees (pulling every blocked point
+// back would pile samples onto the surfaces).
+constexpr uint32_t kFootprintDraws = 16;
 
 bool isSoftShadowed(const Light& light) {
   return light.type == LightType::Directional ? light.shadowAngle > 0.0f
@@ -161,15 +170,101 @@ std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<con
   return visibilityMaxDistances(positions, bakedBounds);
 }
 
+vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, uint32_t s) {
+  if (!(radius > 0.0f)) return p;
+  SampleStream stream(hashValues(key, kFootprintTag), s);
+  const float gap = kFootprintGap * radius;
+  vec3 clipped = p;
+  for (uint32_t draw = 0; draw < kFootprintDraws; ++draw) {
+    stream.setDimension(4 * draw);
+    const vec3 dir = squareToUniformSphere(stream.get2D());
+    const float r = radius * std::cbrt(stream.get1D());  // uniform in the ball's volume
+    const std::optional<Hit> hit = tracer.intersect(Ray{p, dir, 0.0f, r + gap});
+    if (!hit) return p + r * dir;  // the segment from p is free: a point of the visible ball
+    clipped = p + std::max(0.0f, hit->t - gap) * dir;
+  }
+  return clipped;  // every draw behind geometry: the last, pulled back
+}
+
+std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
+                                       const ProbeBakeSettings& settings) {
+  const size_t n = positions.size();
+  std::vector<float> out(n, 0.0f);
+  if (!(settings.footprint > 0.0f) || !(settings.footprintMaxRadius > 0.0f) || n < 2) return out;
+  // Neighbours farther than `reach` give the cap anyway.
+  const double reach = double(settings.footprintMaxRadius) / double(settings.footprint);
+  Bounds3 bounds;
+  for (const vec3& q : positions) bounds.extend(q);
+  const glm::dvec3 extent = glm::dvec3(bounds.max - bounds.min);
+  const double largest = std::max({extent.x, extent.y, extent.z});
+  if (!(largest > 0.0)) return out;  // every position at one point
+  // Cells about the mean spacing of a set spread over its bounds' largest side, never
+  // more than 1024 per axis.
+  const double cell = std::max(largest / std::max(1.0, std::cbrt(double(n))), largest / 1024.0);
+  auto cellOf = [&](const vec3& q) {
+    return glm::ivec3(glm::floor((glm::dvec3(q) - glm::dvec3(bounds.min)) / cell));
+  };
+  auto cellKey = [](glm::ivec3 c) {
+    return (uint64_t(uint32_t(c.x) & 0x1fffffu) << 42) | (uint64_t(uint32_t(c.y) & 0x1fffffu) << 21) |
+           uint64_t(uint32_t(c.z) & 0x1fffffu);
+  };
+  std::unordered_map<uint64_t, std::vector<uint32_t>> grid;
+  for (size_t i = 0; i < n; ++i) grid[cellKey(cellOf(positions[i]))].push_back(uint32_t(i));
+  const glm::ivec3 cells = glm::ivec3(glm::floor(extent / cell)) + 1;
+  const int maxRing = std::max({cells.x, cells.y, cells.z});
+  for (size_t i = 0; i < n; ++i) {
+    const glm::ivec3 c = cellOf(positions[i]);
+    double best = kInfinity;
+    for (int k = 0; k <= maxRing; ++k) {
+      // Every point of a cell at ring k is at least (k - 1) cells away.
+      if (k >= 1 && double(k - 1) * cell >= std::min(best, reach)) break;
+      for (int dz = -k; dz <= k; ++dz)
+        for (int dy = -k; dy <= k; ++dy)
+          for (int dx = -k; dx <= k; ++dx) {
+            if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != k) continue;
+            const glm::ivec3 o = c + glm::ivec3(dx, dy, dz);
+            if (glm::any(glm::lessThan(o, glm::ivec3(0))) || glm::any(glm::greaterThanEqual(o, cells)))
+              continue;
+            const auto it = grid.find(cellKey(o));
+            if (it == grid.end()) continue;
+            for (uint32_t j : it->second) {
+              const double d = glm::length(glm::dvec3(positions[j]) - glm::dvec3(positions[i]));
+              if (j != i && d > 0.0) best = std::min(best, d);
+            }
+          }
+    }
+    out[i] = float(std::min(double(settings.footprint) * best, double(settings.footprintMaxRadius)));
+  }
+  return out;
+}
+
+float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings) {
+  Bounds3 bakedBounds;
+  for (const Object& o : scene.objects)
+    if (o.settings.isStatic)
+      for (const vec3& v : o.positions) bakedBounds.extend(v);
+  const float diagonal = bakedBounds.empty() ? 0.0f : glm::length(bakedBounds.max - bakedBounds.min);
+  return diagonal > 0.0f ? std::min(settings.footprintMaxRadius, kFootprintSceneFraction * diagonal)
+                         : settings.footprintMaxRadius;
+}
+
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel,
-                      const VisibilityMapSpec& visibility) {
+                      const VisibilityMapSpec& visibility, float footprintRadius) {
   const Scene& scene = integrator.scene();
   const Tracer& tracer = integrator.tracer();
   ShL2Accumulator sum;
   const double weight = 4.0 * double(kPi) / double(rays);
   uint32_t backFaces = 0;
   const bool withVisibility = visibility.resolution > 0;
+  const bool footprint = footprintRadius > 0.0f;
+  // With a footprint, ray s and light evaluation s share the origin footprintOrigin(.., s).
+  std::vector<vec3> origins;
+  if (footprint) {
+    origins.resize(rays);
+    for (uint32_t s = 0; s < rays; ++s)
+      origins[s] = footprintOrigin(tracer, p, footprintRadius, key, s);
+  }
   VisibilityMapBuilder map(withVisibility ? visibility : VisibilityMapSpec{});
   for (uint32_t s = 0; s < rays; ++s) {
     // A probe can take seconds: let Ctrl-C through without waiting for it.
@@ -186,16 +281,21 @@ ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32
         continue;  // inside geometry: no light (what incomingRadiance would return)
       }
     }
-    sum.add(dir, integrator.incomingRadiance(p, dir, key, s).total(), weight);
+    sum.add(dir, integrator.incomingRadiance(footprint ? origins[s] : p, dir, key, s).total(),
+            weight);
   }
 
-  // Punctual lights: exact delta projection c_i += E Y_i(s), visibility averaged.
+  // Punctual lights: exact delta projection c_i += E Y_i(s), visibility averaged (over the
+  // rays' origins with a footprint: one evaluation per ray).
   bool soft = false;
   for (const Light& l : scene.lights) soft = soft || isSoftShadowed(l);
-  const uint32_t evaluations = soft ? std::max(1u, lightSamples) : 1u;
+  const uint32_t evaluations = footprint ? rays : soft ? std::max(1u, lightSamples) : 1u;
   const uint64_t lightKey = hashValues(key, kLightsTag);
   std::vector<DeltaLight> deltas;
-  for (uint32_t j = 0; j < evaluations; ++j) integrator.punctualLights(p, lightKey, j, deltas);
+  for (uint32_t j = 0; j < evaluations; ++j) {
+    if (cancel && (j & 4095u) == 4095u && cancel->load(std::memory_order_relaxed)) break;
+    integrator.punctualLights(footprint ? origins[j] : p, lightKey, j, deltas);
+  }
   for (const DeltaLight& d : deltas) {
     if (!isFinite(d.irradiance)) continue;
     sum.add(d.direction, d.irradiance, 1.0 / double(evaluations));
@@ -214,6 +314,11 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                             ProbeBakeReport* report) {
   if (positions.empty()) return Error{"no probe positions"};
   if (settings.rays == 0) return Error{"rays per probe must be > 0"};
+  if (!(settings.footprint >= 0.0f && settings.footprint <= kMaxProbeFootprint))
+    return Error{"footprint must be in [0, " + std::to_string(kMaxProbeFootprint).substr(0, 3) +
+                 "] (a fraction of the distance to the nearest probe)"};
+  if (!(settings.footprintMaxRadius > 0.0f) || !std::isfinite(settings.footprintMaxRadius))
+    return Error{"footprint max radius must be a finite number > 0"};
   if (!isVisibilityResolution(settings.visibilityResolution))
     return Error{"visibility resolution must be 0 or in [" +
                  std::to_string(kMinVisibilityResolution) + ", " +
@@ -265,6 +370,9 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                               : 0;
   std::vector<uint16_t> moments(count * perProbe);
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
+  ProbeBakeSettings footprintSettings = settings;
+  footprintSettings.footprintMaxRadius = probeFootprintMaxRadius(scene, settings);
+  const std::vector<float> footprintRadius = probeFootprintRadii(positions, footprintSettings);
   ParallelOptions options;
   options.threads = settings.threads;
   options.grain = 1;  // a probe is thousands of paths: balance load probe by probe
@@ -283,7 +391,8 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
           VisibilityMapSpec vis;
           if (!maxDistance.empty()) vis = {settings.visibilityResolution, maxDistance[i]};
           const ProbeSample sample = bakeProbe(integrator, positions[i], key, settings.rays,
-                                               settings.lightSamples, cancel, vis);
+                                               settings.lightSamples, cancel, vis,
+                                               footprintRadius[i]);
           outs[i].sh = sample.sh;
           outs[i].validity = sample.validity;
           std::copy(sample.visibility.begin(), sample.visibility.end(),

@@ -51,6 +51,14 @@ inline constexpr float kMaxProbeCoordinate = 1e7f;
 // blending", says why).
 inline constexpr int32_t kDefaultVisibilityResolution = 32;
 
+// Largest ProbeBakeSettings::footprint: half the nearest-neighbour distance is where two
+// neighbours' balls touch.
+inline constexpr float kMaxProbeFootprint = 0.5f;
+// A footprint's radius is at most this fraction of the diagonal of the static objects' bounds
+// (the 0.55 m Cornell box: 9.6 mm; the breakfast room, 6.7 m: 6.7 cm; the atrium: the
+// metre cap).
+inline constexpr float kFootprintSceneFraction = 0.01f;
+
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
   uint64_t seed = 0;     // keys every random number: probe i uses hashValues(seed, i)
@@ -84,6 +92,18 @@ struct ProbeBakeSettings {
   // 32 x 32 (6 KB per probe): smaller texels leak at silhouettes (docs/probes.md, "Why these
   // choices"; docs/charts.md, chart 6).
   int32_t visibilityResolution = kDefaultVisibilityResolution;
+  // Footprint (spatial prefilter, docs/probes.md "The footprint"): each probe's radiance SH
+  // is the mean over a ball around it instead of the value at its centre, so that light and
+  // shade finer than the probes (a sunbeam striped by a blind) is averaged instead of
+  // aliased. The ball's radius is footprint x the distance to the nearest other probe of the
+  // set, at most footprintMaxRadius and at most kFootprintSceneFraction of the diagonal of
+  // the static objects' bounds (probeFootprintMaxRadius); 0 = a point bake. Every ray (and
+  // every punctual-light sample) starts at its own deterministic point of the part of the ball
+  // the probe sees (footprintOrigin); validity, the visibility map and the probe occlusion
+  // stay those of the centre. In [0, kMaxProbeFootprint]. The defaults were chosen on the
+  // breakfast room, the atrium and the Cornell reference (docs/probe_placement.md, round 8).
+  float footprint = 0.5f;
+  float footprintMaxRadius = 0.1f;  // metres, > 0
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
   // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
@@ -114,7 +134,8 @@ IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSe
 
 // Bakes probes at `positions` (world space, metres). The ProbeSet has one probe per position
 // in the same order (near-duplicates merged by the topology keep their slot and get their
-// own SH), RADIANCE SH, and validity = 1 - (share of rays whose first hit is the back face
+// own SH), RADIANCE SH (each probe's the mean over its footprint ball when
+// settings.footprint > 0: radii from probeFootprintRadii with probeFootprintMaxRadius), and validity = 1 - (share of rays whose first hit is the back face
 // of a single-sided surface), the raw fraction in [0, 1] (1 = open space); occlusion per
 // probe (bakeProbeOcclusion; all 1 outside shadowmask mode) and occlusionLights from the plan.
 // Invalid probes that are filled get their valid neighbours' mean occlusion too. The plan's
@@ -152,9 +173,31 @@ struct ProbeSample {
   float validity = 1.0f;
   std::vector<uint16_t> visibility;  // resolution^2 x {mu, sigma, far} unorm16, or empty
 };
+// `footprintRadius` > 0 bakes the mean over a ball of that radius around p (see
+// ProbeBakeSettings::footprint): ray s starts at footprintOrigin(tracer, p, radius, key, s)
+// and one punctual-light evaluation is made per ray at that origin (instead of lightSamples
+// at p).
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
                       uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr,
-                      const VisibilityMapSpec& visibility = {});
+                      const VisibilityMapSpec& visibility = {}, float footprintRadius = 0.0f);
+
+// Origin of ray s of a probe at p baked over a ball of `radius` (key as bakeProbe's): a
+// point of the ball (a Sobol point of sample s of a side stream of `key`, uniform in volume)
+// whose segment from p is free of geometry up to 1% of the radius beyond it; a blocked point
+// is re-drawn (up to 16 draws, the last then pulled back towards p to 1% of the radius short
+// of the surface), so origins are uniform over the part of the ball the probe sees.
+// p itself when radius <= 0. Deterministic.
+vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, uint32_t s);
+
+// Per position, settings.footprint x the distance to the nearest other position (positions
+// at exactly the same point are not counted), at most settings.footprintMaxRadius; 0 for a
+// lone position or footprint 0. A uniform grid search. bakeProbes passes settings with
+// footprintMaxRadius = probeFootprintMaxRadius(scene, settings).
+std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
+                                       const ProbeBakeSettings& settings);
+// The largest footprint radius in `scene`: settings.footprintMaxRadius, at most
+// kFootprintSceneFraction of the diagonal of the static objects' bounds (when they have any).
+float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings);
 
 // Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
 // Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in

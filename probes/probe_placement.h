@@ -302,6 +302,8 @@ FieldError measureFieldError(const ProbeSet& set, std::span<const vec3> points,
 
 // SH baked at each point with bakeProbe (the probe bake's estimator), keyed by
 // hashValues(seed, i). Used as ground truth at check points and for placement's candidates.
+// Always at the points themselves: settings.footprint is ignored (a truth is the value at its
+// point; a candidate's footprint would depend on the set it ends up in).
 // When `visibility` is given and settings.visibilityResolution > 0, the same rays also fill
 // each point's visibility map (resolution; maxDistance settings.visibilityMaxDistance when
 // > 0, else visibilityMaxDistances over the static objects' bounds; moments point-major: the

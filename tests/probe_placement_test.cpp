@@ -619,7 +619,8 @@ std::vector<CsvRow> csvRows(const std::string& csv) {
 // chose (default settings, the scene's probe groups fixed), against SH baked at the spheres'
 // centres (docs/probe_placement.md, "Where objects go"). Returns the measure; checks the
 // placement's own guarantees.
-SphereError spheresWhereObjectsStand(const Traced& t, uint32_t budget, uint64_t seed = 0) {
+SphereError spheresWhereObjectsStand(const Traced& t, uint32_t budget, uint64_t seed = 0,
+                                     float footprint = ProbeBakeSettings{}.footprint) {
   ProbePlacementSettings s;
   s.budget = budget;
   s.seed = seed;
@@ -631,9 +632,22 @@ SphereError spheresWhereObjectsStand(const Traced& t, uint32_t budget, uint64_t 
   EXPECT_TRUE(placed->probes.size() * 10 >= size_t(budget) * 9 || !placed->belowBudget.empty());
   ProbeBakeSettings bake;  // the probe bake's defaults (deringing, visibility maps), fewer rays
   bake.rays = 2048;
-  Result<ProbeSet> set = bakeProbes(t.scene, *t.tracer, placed->positions(), bake);
-  EXPECT_TRUE(bool(set)) << set.error();
-  if (!set) return {};
+  std::vector<float> footprints = {footprint};
+  // For measuring (docs/probe_placement.md, round 8): KILN_SPHERE_FOOTPRINTS="0 0.25" also
+  // bakes the placed set with those footprints and prints their spheres; the bounds apply to
+  // `footprint`'s.
+  if (const char* env = std::getenv("KILN_SPHERE_FOOTPRINTS")) {
+    std::istringstream in(env);
+    for (float f; in >> f;) footprints.push_back(f);
+  }
+  std::vector<ProbeSet> sets;
+  for (float f : footprints) {
+    bake.footprint = f;
+    Result<ProbeSet> set = bakeProbes(t.scene, *t.tracer, placed->positions(), bake);
+    EXPECT_TRUE(bool(set)) << set.error();
+    if (!set) return {};
+    sets.push_back(std::move(set).value());
+  }
   const std::vector<Bounds3> volumes = placementVolumes(t.scene, {});
   ReachableSpaceSettings rs;
   rs.seeds = s.fixedProbes;
@@ -642,30 +656,40 @@ SphereError spheresWhereObjectsStand(const Traced& t, uint32_t budget, uint64_t 
   objects.reachable = &space;
   objects.objectShare = 1.0f;
   ProbeBakeSettings truthBake = bake;
+  truthBake.footprint = 0.0f;  // the issue's reference: SH baked at the spheres' centres
   truthBake.rays = 4096;
   truthBake.seed = 77;  // apart from the probes' and placement's seeds
   Result<TruthPoints> truth = bakeTruthPoints(t.scene, *t.tracer, volumes, 60, 77, s.validity,
                                               truthBake, nullptr, nullptr, objects);
   EXPECT_TRUE(bool(truth)) << truth.error();
   if (!truth) return {};
-  SphereError e = sphereError(*set, *truth);
-  std::vector<size_t> order(e.points);
-  std::iota(order.begin(), order.end(), size_t(0));
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return std::max(e.ratio[a], 1.0f / e.ratio[a]) > std::max(e.ratio[b], 1.0f / e.ratio[b]);
-  });
-  std::ostringstream worst;
-  for (size_t k = 0; k < std::min<size_t>(5, order.size()); ++k) {
-    const size_t i = order[k];
-    worst << "(" << truth->points[i].x << ", " << truth->points[i].y << ", "
-          << truth->points[i].z << "): ratio " << e.ratio[i] << ", error " << e.perPoint[i]
-          << "; ";
+  SphereError first;
+  for (size_t fi = 0; fi < sets.size(); ++fi) {
+    const SphereError e = sphereError(sets[fi], *truth);
+    if (fi == 0) first = e;
+    std::cout << "footprint " << footprints[fi] << " (radius at most "
+              << probeFootprintMaxRadius(t.scene, bake) << " m): ";
+    size_t beyond = 0;
+    for (float r : e.ratio) beyond += (r > 0.0f ? std::max(r, 1.0f / r) : kInfinity) > 2.0f;
+    std::cout << "beyond 2x " << beyond << "; ";
+    std::vector<size_t> order(e.points);
+    std::iota(order.begin(), order.end(), size_t(0));
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+      return std::max(e.ratio[a], 1.0f / e.ratio[a]) > std::max(e.ratio[b], 1.0f / e.ratio[b]);
+    });
+    std::ostringstream worst;
+    for (size_t k = 0; k < std::min<size_t>(5, order.size()); ++k) {
+      const size_t i = order[k];
+      worst << "(" << truth->points[i].x << ", " << truth->points[i].y << ", "
+            << truth->points[i].z << "): ratio " << e.ratio[i] << ", error " << e.perPoint[i]
+            << "; ";
+    }
+    std::cout << t.scene.path << ", placement seed " << seed << ": " << placed->probes.size()
+              << " probes, " << e.points
+              << " spheres: median " << e.median << ", mean " << e.mean << ", worst ratio "
+              << e.worstRatio << "; worst: " << worst.str() << "\n";
   }
-  std::cout << t.scene.path << ", placement seed " << seed << ": " << placed->probes.size()
-            << " probes, " << e.points
-            << " spheres: median " << e.median << ", mean " << e.mean << ", worst ratio "
-            << e.worstRatio << "; worst: " << worst.str() << "\n";
-  return e;
+  return first;
 }
 
 // Issue 13's bounds (median within 15%, worst within 2x) at placement seeds 0-4, each a
@@ -677,14 +701,18 @@ SphereError spheresWhereObjectsStand(const Traced& t, uint32_t budget, uint64_t 
 // (docs/probe_placement.md, round 7). Measured with ratio picks where objects stand and
 // CGAL's cells (the default backend since 2026-12-03): medians 0.091, 0.124, 0.135, 0.111,
 // 0.123 (mean 0.117), worst ratios 2.14, 1.87, 2.63, 2.62, 2.13, 5 of the 300 spheres beyond
-// 2x; with TetGen's cells: medians 0.155, 0.122, 0.151, 0.159, 0.120 (mean 0.141), worst 2.39,
+// 2x, with point-baked probes; baked over a footprint (the default since round 8: radius
+// 0.5 x the nearest probe's distance, at most 0.1 m) the same sets give medians 0.103, 0.124,
+// 0.135, 0.128, 0.136 (mean 0.125), worst 1.95, 1.87, 2.63, 2.68, 2.18, 4 beyond 2x (a
+// footprint up to 0.5 m made the shaded spheres beside sun edges brighter: worst 2.71, 2.27,
+// 2.67, 3.10, 2.47); with TetGen's cells: medians 0.155, 0.122, 0.151, 0.159, 0.120 (mean 0.141), worst 2.39,
 // 1.81, 1.58, 1.88, 2.58, 2 beyond 2x; main at df3cc41 (relative-error picks, TetGen):
 // medians 0.148, 0.180, 0.141, 0.180, 0.143 (mean 0.158), worst 1.63, 2.09, 2.34, 5.57, 3.79,
 // at least 9 beyond 2x. The bounds keep what was reached with room for another draw (a
 // different machine's Embree bits change placement as a seed does): every seed within 0.18
 // and 3x, the five medians' mean within 0.14 (the medians' spread over seeds is about 0.018,
-// so their mean's is about 0.008: 0.117 sits 2.9 of those below), at most 10 of the 300
-// spheres beyond 2x (5 measured; a count's spread is about its square root, 2.2).
+// so their mean's is about 0.008: 0.125 sits 1.9 of those below), at most 10 of the 300
+// spheres beyond 2x (4 measured; a count's spread is about its square root, 2).
 TEST(ProbePlacementSlow, SpheresWhereObjectsStandInTheAtriumAtFivePlacementSeeds) {
   const Traced t = atrium();
   double medianSum = 0.0;
@@ -704,9 +732,10 @@ TEST(ProbePlacementSlow, SpheresWhereObjectsStandInTheAtriumAtFivePlacementSeeds
   EXPECT_LE(beyond2x, 10u);
 }
 
-// At placement seeds 0 and 1 (measured with ratio picks and CGAL's cells: 256 and 232 probes,
-// medians 0.086 and 0.084, worst ratios 2.94 and 3.41; with TetGen's: 256 and 234, 0.092 and
-// 0.083, 3.31 and 3.43; main at seed 0 before ratio picks: 221 probes, 0.086, 3.38).
+// At placement seeds 0 and 1. Measured with the probes baked over a footprint (the default
+// since round 8; docs/probe_placement.md, "Probes baked over a footprint"): 256 and 232
+// probes, medians 0.098 and 0.094, worst ratios 2.05 and 1.97; the same sets point-baked
+// (footprint 0, as before round 8): medians 0.086 and 0.084, worst 2.94 and 3.41.
 TEST(ProbePlacementSlow, SpheresWhereObjectsStandInTheBreakfastRoom) {
   if (!test::sharedAvailable()) GTEST_SKIP() << "../shared absent: no breakfast room";
   Result<Scene> s = loadScene(test::sharedDir() + "/scenes/breakfast_room/BreakfastRoom.gltf");
@@ -716,19 +745,16 @@ TEST(ProbePlacementSlow, SpheresWhereObjectsStandInTheBreakfastRoom) {
     const SphereError e = spheresWhereObjectsStand(t, 256, seed);
     EXPECT_GE(e.points, 30u) << "seed " << seed;
     EXPECT_LE(e.median, 0.15f) << "seed " << seed;
-    // Not the issue's 2x: the worst sphere, at (1.56, 1.08, -0.58) at both seeds, is lit
-    // 3.3-3.4x too dark: it stands in the sunbeam from the window, 0.31 m from any surface,
-    // and the four probes of its tetrahedron (0.19-0.37 m away at seed 0, all visible from
-    // it) are in the shade. The window's blind stripes the beam into lit sheets about 3 cm
-    // thick between shaded ones 4.7 cm thick (L00 3.0 against 0.9), which probes 0.587 m
-    // apart cannot resolve: even the beam's mean light (1.6-1.8 over 0.1-0.3 m) is 1.7-1.9x
-    // off at points on and beside the sheets. Tried: picking for a bad check point a probe
-    // lit as it is (same baked lights unoccluded): the worst became 5.05x (a sunlit probe
-    // under the table lighting a shaded sphere); ratio picks without leaving the beam's thin
-    // sheets out gave 4.50x at seed 0. So this bound keeps what was reached
-    // (docs/probe_placement.md, "The breakfast room's worst sphere", "The sunbeam is striped
-    // by the blind" and round 7).
-    EXPECT_LE(e.worstRatio, 4.0f) << "seed " << seed;
+    // About the issue's 2x, not under it. The window's blind stripes the sunbeam into lit
+    // sheets about 3 cm thick between shaded ones 4.7 cm thick (L00 3.0 against 0.9), which
+    // probes 0.587 m apart cannot resolve: point-baked, a probe there is lit or shaded at
+    // random and the sphere at (1.56, 1.08, -0.58), on a lit sheet, was 3.4x too dark between
+    // four shaded probes. Baked over a footprint the probes carry the beam's mean, and the
+    // best a smooth field can do is 1.7-1.9x off at points on and beside the sheets: the
+    // worst spheres are now shaded ones in and beside the beam, lit 1.97-2.05x too bright
+    // (measured with radius caps of 0.067-0.5 m: 1.95-2.05). 2.5x leaves room for another
+    // draw without letting the point-baked 2.9-3.4x back.
+    EXPECT_LE(e.worstRatio, 2.5f) << "seed " << seed;
   }
 }
 

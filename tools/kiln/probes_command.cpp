@@ -67,6 +67,8 @@ struct BakeOptions {
   bool noSceneProbes = false;
   int visibilityResolution = kDefaultVisibilityResolution;  // 0 = none
   float visibilityMaxDistance = 0.0f;                       // 0 = per probe (auto)
+  float footprint = ProbeBakeSettings{}.footprint;          // 0 = a point bake
+  float footprintMaxRadius = ProbeBakeSettings{}.footprintMaxRadius;
   bool quiet = false;
   bool mpi = false;
   SkyOptions sky;
@@ -122,6 +124,8 @@ int runBake(const BakeOptions& options) {
   settings.dering = !o.noDering;
   settings.visibilityResolution = o.visibilityResolution;
   settings.visibilityMaxDistance = o.visibilityMaxDistance;
+  settings.footprint = o.footprint;
+  settings.footprintMaxRadius = o.footprintMaxRadius;
   if (!o.lightingMode.empty()) {
     Result<LightingMode> mode = parseLightingMode(o.lightingMode);
     if (!mode) {
@@ -482,6 +486,35 @@ void registerProbesCommand(CLI::App& app) {
             return "must be a finite number of metres >= 0 (0 = auto), got '" + text + "'";
           },
           "METRES >= 0"))
+      ->capture_default_str();
+  b->add_option("--footprint", bake->footprint,
+                "Bake each probe as the mean over a ball of this fraction of the distance to "
+                "its nearest probe (at most --footprint-max-radius): a prefilter against light "
+                "and shade finer than the probes (0 to 0.5; 0 = at the probe's point)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v >= 0.0 &&
+                v <= double(kMaxProbeFootprint))
+              return "";
+            return "must be a number from 0 to 0.5 (a fraction of the distance to the nearest "
+                   "probe; 0 = a point bake), got '" + text + "'";
+          },
+          "0..0.5"))
+      ->capture_default_str();
+  b->add_option("--footprint-max-radius", bake->footprintMaxRadius,
+                "Largest footprint radius, metres (also never more than 1% of the scene's "
+                "diagonal)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v > 0.0 && v <= 1e6)
+              return "";
+            return "must be a finite number of metres > 0, got '" + text + "'";
+          },
+          "METRES > 0"))
       ->capture_default_str();
   addSkyOptions(b, bake->sky);
   b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
