@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -170,6 +171,30 @@ std::vector<float> probeVisibilityMaxDistances(const Scene& scene, std::span<con
   return visibilityMaxDistances(positions, bakedBounds);
 }
 
+uint64_t positionKey(vec3 p) {
+  uint32_t b[3];
+  std::memcpy(b, &p, sizeof b);
+  return hashValues(b[0], (uint64_t(b[1]) << 32) | b[2]);
+}
+
+bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p) {
+  const uint64_t key = positionKey(p);
+  for (uint32_t l = 0; l < scene.lights.size(); ++l) {
+    if (scene.lights[l].mode == LightMode::Realtime) continue;
+    auto lit = [&](vec3 q) {
+      return luminance(integrator.lightVisibility(q, vec3(0.0f), l, key, 0)) > 0.5f;
+    };
+    const bool here = lit(p);
+    for (int axis = 0; axis < 3; ++axis)
+      for (float r : {0.03f, 0.06f, 0.09f}) {
+        vec3 d(0.0f);
+        d[axis] = r;
+        if (lit(p - d) != here && lit(p + d) != here) return true;
+      }
+  }
+  return false;
+}
+
 vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, uint32_t s) {
   if (!(radius > 0.0f)) return p;
   SampleStream stream(hashValues(key, kFootprintTag), s);
@@ -236,16 +261,6 @@ std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
     out[i] = float(std::min(double(settings.footprint) * best, double(settings.footprintMaxRadius)));
   }
   return out;
-}
-
-float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings) {
-  Bounds3 bakedBounds;
-  for (const Object& o : scene.objects)
-    if (o.settings.isStatic)
-      for (const vec3& v : o.positions) bakedBounds.extend(v);
-  const float diagonal = bakedBounds.empty() ? 0.0f : glm::length(bakedBounds.max - bakedBounds.min);
-  return diagonal > 0.0f ? std::min(settings.footprintMaxRadius, kFootprintSceneFraction * diagonal)
-                         : settings.footprintMaxRadius;
 }
 
 ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32_t rays,
@@ -360,6 +375,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     ShL2Rgb sh;
     float validity = 1.0f;
     uint64_t rays = 0;
+    bool footprint = false;  // baked over a ball
   };
   std::vector<ProbeOut> outs(count);
   const std::vector<float> maxDistance = probeVisibilityMaxDistances(scene, positions, settings);
@@ -370,9 +386,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                               : 0;
   std::vector<uint16_t> moments(count * perProbe);
   std::vector<glm::vec4> occlusion(count, glm::vec4(1.0f));
-  ProbeBakeSettings footprintSettings = settings;
-  footprintSettings.footprintMaxRadius = probeFootprintMaxRadius(scene, settings);
-  const std::vector<float> footprintRadius = probeFootprintRadii(positions, footprintSettings);
+  const std::vector<float> footprintRadius = probeFootprintRadii(positions, settings);
   ParallelOptions options;
   options.threads = settings.threads;
   options.grain = 1;  // a probe is thousands of paths: balance load probe by probe
@@ -390,11 +404,17 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
           const uint64_t key = hashValues(settings.seed, i);
           VisibilityMapSpec vis;
           if (!maxDistance.empty()) vis = {settings.visibilityResolution, maxDistance[i]};
+          // Only where light and shade are finer than the probes, unless asked everywhere.
+          const float radius = footprintRadius[i] > 0.0f &&
+                                       (settings.footprintEverywhere ||
+                                        inThinLightSheet(scene, integrator, positions[i]))
+                                   ? footprintRadius[i]
+                                   : 0.0f;
           const ProbeSample sample = bakeProbe(integrator, positions[i], key, settings.rays,
-                                               settings.lightSamples, cancel, vis,
-                                               footprintRadius[i]);
+                                               settings.lightSamples, cancel, vis, radius);
           outs[i].sh = sample.sh;
           outs[i].validity = sample.validity;
+          outs[i].footprint = radius > 0.0f;
           std::copy(sample.visibility.begin(), sample.visibility.end(),
                     moments.begin() + ptrdiff_t(i * perProbe));
           if (anyChannel) {
@@ -411,7 +431,10 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
       !exchangeItems(split, occlusion, 1, true, true, false, nullptr))
     return Error{"cancelled"};
   if (progress) progress->finish();
-  for (const ProbeOut& o : outs) rep.rays += o.rays;
+  for (const ProbeOut& o : outs) {
+    rep.rays += o.rays;
+    rep.footprintProbes += o.footprint ? 1 : 0;
+  }
 
   for (size_t i = 0; i < count; ++i) {
     set.sh[i] = outs[i].sh;

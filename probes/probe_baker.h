@@ -54,10 +54,6 @@ inline constexpr int32_t kDefaultVisibilityResolution = 32;
 // Largest ProbeBakeSettings::footprint: half the nearest-neighbour distance is where two
 // neighbours' balls touch.
 inline constexpr float kMaxProbeFootprint = 0.5f;
-// A footprint's radius is at most this fraction of the diagonal of the static objects' bounds
-// (the 0.55 m Cornell box: 9.6 mm; the breakfast room, 6.7 m: 6.7 cm; the atrium: the
-// metre cap).
-inline constexpr float kFootprintSceneFraction = 0.01f;
 
 struct ProbeBakeSettings {
   uint32_t rays = 4096;  // rays per probe (> 0); a power of two keeps the Sobol set stratified
@@ -96,14 +92,19 @@ struct ProbeBakeSettings {
   // is the mean over a ball around it instead of the value at its centre, so that light and
   // shade finer than the probes (a sunbeam striped by a blind) is averaged instead of
   // aliased. The ball's radius is footprint x the distance to the nearest other probe of the
-  // set, at most footprintMaxRadius and at most kFootprintSceneFraction of the diagonal of
-  // the static objects' bounds (probeFootprintMaxRadius); 0 = a point bake. Every ray (and
+  // set, at most footprintMaxRadius; 0 = a point bake. It applies only to probes that stand
+  // in such light (inThinLightSheet) unless footprintEverywhere. Every ray (and
   // every punctual-light sample) starts at its own deterministic point of the part of the ball
   // the probe sees (footprintOrigin); validity, the visibility map and the probe occlusion
   // stay those of the centre. In [0, kMaxProbeFootprint]. The defaults were chosen on the
   // breakfast room, the atrium and the Cornell reference (docs/probe_placement.md, round 8).
   float footprint = 0.5f;
   float footprintMaxRadius = 0.1f;  // metres, > 0
+  // false: the footprint applies only to probes in a sheet of light or shade of a baked
+  // punctual light thinner than 18 cm (inThinLightSheet); elsewhere probes are point bakes,
+  // which are more accurate where light varies no faster than the probes (near surfaces a
+  // ball clipped by the surface is off-centre; docs/probe_placement.md, round 8).
+  bool footprintEverywhere = false;
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
   // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
@@ -116,6 +117,7 @@ struct ProbeBakeReport {
   std::vector<int32_t> invalidProbes;  // back-face ratio > invalidBackfaceRatio
   int32_t filledProbes = 0;            // invalid probes given their neighbours' SH
   int32_t deringedProbes = 0;          // probes whose SH the deringing fit changed
+  int32_t footprintProbes = 0;         // probes baked over a footprint (not at their point)
   uint64_t rays = 0;                   // rays traced by the integrator (all threads)
   IntegratorSettings integrator;       // as resolved from the scene and the settings
   LightModePlan lightModes;            // what each light baked, shadowmask channels
@@ -135,7 +137,8 @@ IntegratorSettings probeIntegratorSettings(const Scene& scene, const ProbeBakeSe
 // Bakes probes at `positions` (world space, metres). The ProbeSet has one probe per position
 // in the same order (near-duplicates merged by the topology keep their slot and get their
 // own SH), RADIANCE SH (each probe's the mean over its footprint ball when
-// settings.footprint > 0: radii from probeFootprintRadii with probeFootprintMaxRadius), and validity = 1 - (share of rays whose first hit is the back face
+// settings.footprint > 0 and the probe is in a thin light sheet or footprintEverywhere: radii
+// from probeFootprintRadii), and validity = 1 - (share of rays whose first hit is the back face
 // of a single-sided surface), the raw fraction in [0, 1] (1 = open space); occlusion per
 // probe (bakeProbeOcclusion; all 1 outside shadowmask mode) and occlusionLights from the plan.
 // Invalid probes that are filled get their valid neighbours' mean occlusion too. The plan's
@@ -181,6 +184,18 @@ ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32
                       uint32_t lightSamples, const std::atomic<bool>* cancel = nullptr,
                       const VisibilityMapSpec& visibility = {}, float footprintRadius = 0.0f);
 
+// A key from a position's bits: the rays probing a point depend on where it is, not on which
+// list it is in or which thread looks.
+uint64_t positionKey(vec3 p);
+
+// True when p lies in a sheet of light or shade of a baked punctual light thinner than
+// 2 x 9 cm: along some axis, the light's visibility at p differs from both points at +-r
+// (r = 3, 6 or 9 cm). A blind's slats stripe a sunbeam so (the breakfast room: 3 cm lit
+// sheets between 4.7 cm of shade, docs/probe_placement.md round 6); no probe field resolves
+// such light: point-baked probes there alias (each lit or shaded at random), and placement's
+// picks for such points spread it over the shade beside them (round 7).
+bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p);
+
 // Origin of ray s of a probe at p baked over a ball of `radius` (key as bakeProbe's): a
 // point of the ball (a Sobol point of sample s of a side stream of `key`, uniform in volume)
 // whose segment from p is free of geometry up to 1% of the radius beyond it; a blocked point
@@ -191,13 +206,9 @@ vec3 footprintOrigin(const Tracer& tracer, vec3 p, float radius, uint64_t key, u
 
 // Per position, settings.footprint x the distance to the nearest other position (positions
 // at exactly the same point are not counted), at most settings.footprintMaxRadius; 0 for a
-// lone position or footprint 0. A uniform grid search. bakeProbes passes settings with
-// footprintMaxRadius = probeFootprintMaxRadius(scene, settings).
+// lone position or footprint 0. A uniform grid search.
 std::vector<float> probeFootprintRadii(std::span<const vec3> positions,
                                        const ProbeBakeSettings& settings);
-// The largest footprint radius in `scene`: settings.footprintMaxRadius, at most
-// kFootprintSceneFraction of the diagonal of the static objects' bounds (when they have any).
-float probeFootprintMaxRadius(const Scene& scene, const ProbeBakeSettings& settings);
 
 // Probe occlusion of scene light `light` at p: the mean over `samples` evaluations j of
 // Integrator::lightVisibility(p, 0, light, hashValues(key, tag, light), j) (tag fixed in

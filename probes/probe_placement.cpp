@@ -33,14 +33,6 @@ constexpr uint64_t kCandidateTag = 0x63616e64ULL;     // "cand"
 constexpr uint64_t kTruthTag = 0x7472757468ULL;       // "truth"
 constexpr uint64_t kSpawnTag = 0x737061776eULL;       // "spawn"
 
-// A key from a position's bits: the rays probing a point depend on where it is, not on which
-// list it is in or which thread looks.
-uint64_t positionKey(vec3 p) {
-  uint32_t b[3];
-  std::memcpy(b, &p, sizeof b);
-  return hashValues(b[0], (uint64_t(b[1]) << 32) | b[2]);
-}
-
 std::string formatMetres(float v) {
   std::ostringstream s;
   s.precision(3);
@@ -499,29 +491,6 @@ struct Candidate {
   std::string why;
   bool fixed = false;  // a fixed probe (ProbePlacementSettings::fixedProbes)
 };
-
-// True when p lies in a sheet of light or shade of a baked punctual light thinner than
-// 2 x 9 cm: along some axis, the light's visibility at p differs from both points at +-r
-// (r = 3, 6 or 9 cm). A blind's slats stripe a sunbeam so (the breakfast room: 3 cm lit
-// sheets between 4.7 cm of shade, docs/probe_placement.md round 6); no probe field resolves
-// such light, and picking for it there spreads it over the shade beside it (round 7).
-bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p) {
-  const uint64_t key = positionKey(p);
-  for (uint32_t l = 0; l < scene.lights.size(); ++l) {
-    if (scene.lights[l].mode == LightMode::Realtime) continue;
-    auto lit = [&](vec3 q) {
-      return luminance(integrator.lightVisibility(q, vec3(0.0f), l, key, 0)) > 0.5f;
-    };
-    const bool here = lit(p);
-    for (int axis = 0; axis < 3; ++axis)
-      for (float r : {0.03f, 0.06f, 0.09f}) {
-        vec3 d(0.0f);
-        d[axis] = r;
-        if (lit(p - d) != here && lit(p + d) != here) return true;
-      }
-  }
-  return false;
-}
 
 // Octree corners over one volume (Godot LightmapGI's candidates): cells split down to maxDepth
 // where a surface is within the cell's half-diagonal of its centre or where a baked punctual

@@ -263,6 +263,7 @@ std::vector<uint8_t> bakeBytes(const World& w, int threads, uint64_t seed, float
   settings.threads = threads;
   settings.seed = seed;
   settings.footprint = footprint;
+  settings.footprintEverywhere = true;  // no thin light sheet here: every probe's ball
   auto set = bakeProbes(w.scene, *w.tracer, positions, settings, nullptr, nullptr, &report);
   EXPECT_TRUE(set.ok()) << set.error();
   // The deringing fit is part of what must be bit-identical: some probes of the point bake
@@ -388,6 +389,7 @@ TEST(ProbeFootprint, WithoutGeometryTheFootprintChangesNothing) {
   s.rays = 256;
   auto pointSet = bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0.0f), 0.5f), s);
   s.footprint = 0.5f;
+  s.footprintEverywhere = true;
   auto ballSet = bakeProbes(w.scene, *w.tracer, cubeCorners(vec3(0.0f), 0.5f), s);
   ASSERT_TRUE(pointSet.ok() && ballSet.ok());
   for (size_t i = 0; i < 8; ++i) expectShNear(ballSet->sh[i], pointSet->sh[i], 2e-5f, "set");
@@ -531,6 +533,44 @@ TEST(ProbeFootprint, AProbeInAStripedBeamGetsTheBallsMean) {
   // Measured: mean 1.457, footprint bake 1.458 (key 7); at keys 1-8 1.399-1.459 (mean 1.431,
   // spread 0.022, 1.5%): 6% is that spread's range twice.
   EXPECT_NEAR(ball, mean, 0.06 * mean);
+}
+
+// The default bake averages over a ball only where the light is striped finer than the
+// probes: the probe in the beam gets its ball (about half its lit sheet's L00, as above), the
+// probe in the room's plain shade is the point bake bit for bit; asked everywhere, the shaded
+// probe's ball changes its bake too (by noise: its light is smooth there).
+TEST(ProbeFootprint, TheDefaultBakeAveragesOnlyInThinLightSheets) {
+  SlattedWindowRoom w;
+  Integrator integrator(w.scene, *w.tracer, probeIntegratorSettings(w.scene, {}));
+  const vec3 beam = vec3(SlattedWindowRoom::kWindowX, 1.5f, 0.0f) + 1.0f * w.sunTravel;
+  const vec3 shade(-1.0f, 2.3f, 1.3f);  // the back of the room, 0.7 m from the walls
+  EXPECT_TRUE(inThinLightSheet(w.scene, integrator, beam));
+  EXPECT_FALSE(inThinLightSheet(w.scene, integrator, shade));
+  // Neighbours 0.5 m away or more: radius min(0.5 x 0.5, 0.1) = 0.1 m.
+  const std::vector<vec3> positions = {beam, beam + vec3(0.0f, 0.0f, 0.6f), shade,
+                                       shade + vec3(0.0f, 0.0f, -0.6f), vec3(-1.0f, 0.5f, -1.0f),
+                                       vec3(0.5f, 2.5f, -1.5f)};
+  ProbeBakeSettings s;
+  s.rays = 2048;
+  ASSERT_EQ(probeFootprintRadii(positions, s)[0], 0.1f);
+  auto byDefault = bakeProbes(w.scene, *w.tracer, positions, s);
+  s.footprint = 0.0f;
+  auto point = bakeProbes(w.scene, *w.tracer, positions, s);
+  s.footprint = ProbeBakeSettings{}.footprint;
+  s.footprintEverywhere = true;
+  auto everywhere = bakeProbes(w.scene, *w.tracer, positions, s);
+  ASSERT_TRUE(byDefault.ok() && point.ok() && everywhere.ok());
+  std::cout << "beam probe L00: point " << luminance0(point->sh[0]) << ", default "
+            << luminance0(byDefault->sh[0]) << "\n";
+  // The ball of 0.1 m holds about two periods of the stripes (7.8 cm), lit 40% of it: the
+  // point bake on its lit sheet is about twice the ball's mean (measured 3.07 against 1.5
+  // over 0.2 m above); 0.75 leaves room for the ball's own draw of sheets.
+  EXPECT_LT(luminance0(byDefault->sh[0]), 0.75f * luminance0(point->sh[0]));
+  for (int i = 0; i < kShL2Count; ++i) {
+    EXPECT_EQ(byDefault->sh[2].c[i], point->sh[2].c[i]) << i;
+    EXPECT_EQ(byDefault->sh[3].c[i], point->sh[3].c[i]) << i;
+  }
+  EXPECT_NE(everywhere->sh[2].c[0], point->sh[2].c[0]);
 }
 
 // Degenerate sets still bake (one probe: dimension 0, every query gets it).

@@ -69,6 +69,7 @@ struct BakeOptions {
   float visibilityMaxDistance = 0.0f;                       // 0 = per probe (auto)
   float footprint = ProbeBakeSettings{}.footprint;          // 0 = a point bake
   float footprintMaxRadius = ProbeBakeSettings{}.footprintMaxRadius;
+  bool footprintEverywhere = ProbeBakeSettings{}.footprintEverywhere;
   bool quiet = false;
   bool mpi = false;
   SkyOptions sky;
@@ -126,6 +127,7 @@ int runBake(const BakeOptions& options) {
   settings.visibilityMaxDistance = o.visibilityMaxDistance;
   settings.footprint = o.footprint;
   settings.footprintMaxRadius = o.footprintMaxRadius;
+  settings.footprintEverywhere = o.footprintEverywhere;
   if (!o.lightingMode.empty()) {
     Result<LightingMode> mode = parseLightingMode(o.lightingMode);
     if (!mode) {
@@ -162,7 +164,8 @@ int runBake(const BakeOptions& options) {
     std::cerr << "kiln: wrote " << o.out << ": " << set->probeCount() << " probes, "
               << set->cellCount() << " cells (dimension " << set->dimension << "), "
               << report.invalidProbes.size() << " invalid, " << report.deringedProbes
-              << " deringed, " << report.integrator.maxBounces << " bounces, " << report.rays
+              << " deringed, " << report.footprintProbes << " over a footprint, "
+              << report.integrator.maxBounces << " bounces, " << report.rays
               << " rays in " << seconds << " s\n";
     std::cerr << "kiln: lighting mode " << lightingModeName(report.lightModes.mode);
     for (int c = 0; c < kProbeOcclusionChannels; ++c) {
@@ -490,7 +493,9 @@ void registerProbesCommand(CLI::App& app) {
   b->add_option("--footprint", bake->footprint,
                 "Bake each probe as the mean over a ball of this fraction of the distance to "
                 "its nearest probe (at most --footprint-max-radius): a prefilter against light "
-                "and shade finer than the probes (0 to 0.5; 0 = at the probe's point)")
+                "and shade finer than the probes, for probes in a sheet of light or shade under "
+                "18 cm thick (a blind's stripes; see --footprint-everywhere) (0 to 0.5; 0 = at "
+                "the probe's point)")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
             char* end = nullptr;
@@ -504,8 +509,7 @@ void registerProbesCommand(CLI::App& app) {
           "0..0.5"))
       ->capture_default_str();
   b->add_option("--footprint-max-radius", bake->footprintMaxRadius,
-                "Largest footprint radius, metres (also never more than 1% of the scene's "
-                "diagonal)")
+                "Largest footprint radius, metres")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
             char* end = nullptr;
@@ -516,6 +520,9 @@ void registerProbesCommand(CLI::App& app) {
           },
           "METRES > 0"))
       ->capture_default_str();
+  b->add_flag("--footprint-everywhere", bake->footprintEverywhere,
+              "Bake every probe over its footprint, not only those in thin sheets of light or "
+              "shade (smoother, but less accurate where light varies no faster than the probes)");
   addSkyOptions(b, bake->sky);
   b->add_flag("--quiet,-q", bake->quiet, "No progress or summary on stderr");
   addMpiFlag(b, &bake->mpi);
