@@ -241,6 +241,19 @@ int resolveSky(const SkyOptions& o, std::optional<Sky>* sky) {
   return kExitOk;
 }
 
+CLI::Validator finiteNumberValidator(double lo, bool loOpen, double hi, const std::string& what,
+                                     const std::string& name) {
+  return CLI::Validator(
+      [lo, loOpen, hi, what](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        const bool inRange = (loOpen ? v > lo : v >= lo) && v <= hi;
+        if (end != text.c_str() && *end == '\0' && std::isfinite(v) && inRange) return "";
+        return "must be " + what + ", got '" + text + "'";
+      },
+      name);
+}
+
 CLI::Validator visibilityResolutionValidator(const std::string& zero) {
   const std::string range =
       std::to_string(kMinVisibilityResolution) + " to " + std::to_string(kMaxVisibilityResolution);

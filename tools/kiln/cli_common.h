@@ -86,6 +86,11 @@ int resolveSky(const SkyOptions& options, std::optional<Sky>* sky);
 // Checks a --visibility-resolution value: 0 (whose meaning `zero` names in the message) or an
 // integer in [kMinVisibilityResolution, kMaxVisibilityResolution].
 CLI::Validator visibilityResolutionValidator(const std::string& zero);
+// Checks a finite number in [lo, hi] (in (lo, hi] when loOpen); NaN and infinities fail
+// (CLI::Range lets NaN through: every comparison with it is false). The message is "must be
+// " + what + ", got '<text>'"; `name` is the validator's description in --help.
+CLI::Validator finiteNumberValidator(double lo, bool loOpen, double hi, const std::string& what,
+                                     const std::string& name);
 
 void registerInfoCommand(CLI::App& app);
 void registerBakeCommand(CLI::App& app);  // kiln bake (lightmaps)

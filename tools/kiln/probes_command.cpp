@@ -479,16 +479,8 @@ void registerProbesCommand(CLI::App& app) {
   b->add_option("--visibility-max-distance", bake->visibilityMaxDistance,
                 "Metres the visibility depths are clamped to (0 = per probe, the distance to "
                 "the farthest corner of the scene and the probes)")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            // Range() lets NaN through (every comparison with it is false).
-            char* end = nullptr;
-            const double v = std::strtod(text.c_str(), &end);
-            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v >= 0.0 && v <= 1e9)
-              return "";
-            return "must be a finite number of metres >= 0 (0 = auto), got '" + text + "'";
-          },
-          "METRES >= 0"))
+      ->check(finiteNumberValidator(0.0, false, 1e9, "a finite number of metres >= 0 (0 = auto)",
+                                    "METRES >= 0"))
       ->capture_default_str();
   b->add_option("--footprint", bake->footprint,
                 "Bake each probe as the mean over a ball of this fraction of the distance to "
@@ -496,29 +488,14 @@ void registerProbesCommand(CLI::App& app) {
                 "and shade finer than the probes, for probes in a sheet of light or shade under "
                 "18 cm thick (a blind's stripes; see --footprint-everywhere) (0 to 0.5; 0 = at "
                 "the probe's point)")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            char* end = nullptr;
-            const double v = std::strtod(text.c_str(), &end);
-            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v >= 0.0 &&
-                v <= double(kMaxProbeFootprint))
-              return "";
-            return "must be a number from 0 to 0.5 (a fraction of the distance to the nearest "
-                   "probe; 0 = a point bake), got '" + text + "'";
-          },
-          "0..0.5"))
+      ->check(finiteNumberValidator(0.0, false, double(kMaxProbeFootprint),
+                                    "a number from 0 to 0.5 (a fraction of the distance to the "
+                                    "nearest probe; 0 = a point bake)",
+                                    "0..0.5"))
       ->capture_default_str();
   b->add_option("--footprint-max-radius", bake->footprintMaxRadius,
                 "Largest footprint radius, metres")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            char* end = nullptr;
-            const double v = std::strtod(text.c_str(), &end);
-            if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v > 0.0 && v <= 1e6)
-              return "";
-            return "must be a finite number of metres > 0, got '" + text + "'";
-          },
-          "METRES > 0"))
+      ->check(finiteNumberValidator(0.0, true, 1e6, "a finite number of metres > 0", "METRES > 0"))
       ->capture_default_str();
   b->add_flag("--footprint-everywhere", bake->footprintEverywhere,
               "Bake every probe over its footprint, not only those in thin sheets of light or "
