@@ -179,8 +179,10 @@ uint64_t positionKey(vec3 p) {
 
 bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p) {
   const uint64_t key = positionKey(p);
+  // The lights whose unbounced light the integrator bakes (resolved: one entry per light).
+  const std::vector<bool>& direct = integrator.settings().directLights;
   for (uint32_t l = 0; l < scene.lights.size(); ++l) {
-    if (scene.lights[l].mode == LightMode::Realtime) continue;
+    if (l >= direct.size() || !direct[l]) continue;
     auto lit = [&](vec3 q) {
       return luminance(integrator.lightVisibility(q, vec3(0.0f), l, key, 0)) > 0.5f;
     };

@@ -571,6 +571,16 @@ TEST(ProbeFootprint, TheDefaultBakeAveragesOnlyInThinLightSheets) {
     EXPECT_EQ(byDefault->sh[3].c[i], point->sh[3].c[i]) << i;
   }
   EXPECT_NE(everywhere->sh[2].c[0], point->sh[2].c[0]);
+  // A mixed sun under baked-indirect: only its bounced light goes into the probes, and that is
+  // not striped, so no probe is in a thin sheet.
+  w.scene.lights[0].mode = LightMode::Mixed;
+  Integrator indirectOnly(w.scene, *w.tracer, probeIntegratorSettings(w.scene, {}));
+  EXPECT_FALSE(inThinLightSheet(w.scene, indirectOnly, beam));
+  ProbeBakeReport report;
+  ASSERT_TRUE(bakeProbes(w.scene, *w.tracer, positions, ProbeBakeSettings{}, nullptr, nullptr,
+                         &report)
+                  .ok());
+  EXPECT_EQ(report.footprintProbes, 0);
 }
 
 // Degenerate sets still bake (one probe: dimension 0, every query gets it).
