@@ -191,10 +191,11 @@ uint64_t positionKey(vec3 p);
 // True when p lies in a sheet of light or shade of a punctual light thinner than 2 x 9 cm:
 // along some axis, the light's visibility at p differs from both points at +-r (r = 3, 6 or
 // 9 cm). Only lights whose direct light the integrator bakes count (a mixed light under
-// baked-indirect puts only its smooth bounced light into the probes). A blind's slats stripe a sunbeam so (the breakfast room: 3 cm lit
-// sheets between 4.7 cm of shade, docs/probe_placement.md round 6); no probe field resolves
-// such light: point-baked probes there alias (each lit or shaded at random), and placement's
-// picks for such points spread it over the shade beside them (round 7).
+// baked-indirect puts only its smooth bounced light into the probes). A blind's slats stripe
+// a sunbeam so (the breakfast room: 3 cm lit sheets between 4.7 cm of shade,
+// docs/probe_placement.md round 6); no probe field resolves such light: point-baked probes
+// there alias (each lit or shaded at random), and placement's picks for such points spread it
+// over the shade beside them (round 7).
 bool inThinLightSheet(const Scene& scene, const Integrator& integrator, vec3 p);
 
 // Origin of ray s of a probe at p baked over a ball of `radius` (key as bakeProbe's): a
