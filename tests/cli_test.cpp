@@ -165,8 +165,8 @@ TEST_F(CliTest, HelpAndVersion) {
 // command then fails on its missing input (exit 1) instead, so that no row bakes anything.
 TEST_F(CliTest, FloatOptionsRejectNanAndInfinities) {
   const std::string bake = "bake " + dir + "/missing.gltf --out " + dir + "/out -q";
-  const std::string render = "render " + dir + "/missing.gltf --mode reference --out " + dir +
-                             "/r.png -q";
+  const std::string render =
+      "render " + dir + "/missing.gltf --mode reference --out " + dir + "/r.png -q";
   const std::string compare =
       "render --compare " + dir + "/missing_a.png " + dir + "/missing_b.png --out " + dir + "/";
   const std::string probes = "probes bake " + dir + "/missing.gltf --out " + dir + "/p.kprobe -q";
@@ -175,35 +175,44 @@ TEST_F(CliTest, FloatOptionsRejectNanAndInfinities) {
   const std::string lppv =
       "probes lppv " + dir + "/missing.kprobe --bounds 0,0,0,1,1,1 --out " + dir + "/l";
   const std::string sky = " --sky 1,1,1";
+  // Per command: {option, a value at the edge of its range, a finite value past it}.
+  struct Check {
+    std::string option, edge, outside;
+  };
+  const std::pair<std::string, std::vector<Check>> commands[] = {
+      // 1e5001 overflows to infinity; 3.5e38 is beyond a float (it would read as infinity).
+      {bake,
+       {{"--error-target", "1", "1.0001"},
+        {"--resolution", "1e-6", "1e5001"},
+        {"--resolution", "1e5", "100001"},
+        {"--ao-amount", "1", "-0.001"},
+        {"--ao-distance", "1e-6", "2e9"}}},
+      {bake + sky, {{"--sky-intensity", "0", "-1e-9"}}},
+      {render,
+       {{"--fov", "0.01", "179.5"}, {"--fov", "179", "0.009"}, {"--exposure", "-32", "32.5"}}},
+      {render + sky, {{"--sky-intensity", "3.4e38", "3.5e38"}}},
+      {compare, {{"--diff-scale", "1e-3", "2e6"}}},
+      {probes,
+       {{"--visibility-max-distance", "1e9", "-1"},
+        {"--footprint", "0.5", "0.51"},
+        {"--footprint-max-radius", "1e6", "0"}}},
+      {probes + sky, {{"--sky-intensity", "0", "-1"}}},
+      {place + sky,
+       {{"--min-distance", "1e-30", "0"},
+        {"--spacing", "0", "3.5e38"},
+        {"--leak-weight", "0", "-1"},
+        {"--floor-height", "100", "100.5"},
+        {"--target-error", "0", "-0.5"},
+        {"--sky-intensity", "0", "-1"}}},
+      {comparePlacement, {{"--min-distance", "3.4e38", "-1"}, {"--floor-height", "0", "-1"}}},
+      {lppv, {{"--samples-per-spacing", "1e-300", "0"}}},
+  };
   struct Row {
-    std::string command, option, edge, outside;  // outside: a finite value out of range
+    std::string command, option, edge, outside;
   };
-  const Row rows[] = {
-      {bake, "--error-target", "1", "1.0001"},
-      {bake, "--resolution", "1e-6", "1e5001"},  // 1e5001: an overflow, read as infinity
-      {bake, "--resolution", "1e5", "100001"},
-      {bake, "--ao-amount", "1", "-0.001"},
-      {bake, "--ao-distance", "1e-6", "2e9"},
-      {bake + sky, "--sky-intensity", "0", "-1e-9"},
-      {render, "--fov", "0.01", "179.5"},
-      {render, "--fov", "179", "0.009"},
-      {render, "--exposure", "-32", "32.5"},
-      {render + sky, "--sky-intensity", "3.4e38", "3.5e38"},  // beyond a float: infinity
-      {compare, "--diff-scale", "1e-3", "2e6"},
-      {probes, "--visibility-max-distance", "1e9", "-1"},
-      {probes, "--footprint", "0.5", "0.51"},
-      {probes, "--footprint-max-radius", "1e6", "0"},
-      {probes + sky, "--sky-intensity", "0", "-1"},
-      {place, "--min-distance", "1e-30", "0"},
-      {place, "--spacing", "0", "3.5e38"},
-      {place, "--leak-weight", "0", "-1"},
-      {place, "--floor-height", "100", "100.5"},
-      {place, "--target-error", "0", "-0.5"},
-      {place + sky, "--sky-intensity", "0", "-1"},
-      {comparePlacement, "--min-distance", "3.4e38", "-1"},
-      {comparePlacement, "--floor-height", "0", "-1"},
-      {lppv, "--samples-per-spacing", "1e-300", "0"},
-  };
+  std::vector<Row> rows;
+  for (const auto& [command, checks] : commands)
+    for (const Check& c : checks) rows.push_back({command, c.option, c.edge, c.outside});
   for (const Row& row : rows) {
     for (const std::string& bad : {std::string("nan"), std::string("inf"), std::string("-inf"),
                                    std::string("NaN"), row.outside}) {
@@ -211,7 +220,8 @@ TEST_F(CliTest, FloatOptionsRejectNanAndInfinities) {
       std::string out;
       EXPECT_EQ(run(args, &out), 2) << args << "\n" << out;
       EXPECT_NE(out.find("kiln: error: " + row.option + ": must be "), std::string::npos)
-          << args << "\n" << out;
+          << args << "\n"
+          << out;
       EXPECT_NE(out.find("got '" + bad + "'"), std::string::npos) << args << "\n" << out;
     }
     const std::string args = row.command + " " + row.option + " " + row.edge;
@@ -225,13 +235,15 @@ TEST_F(CliTest, FloatOptionsRejectNanAndInfinities) {
 // --help describes the float options' checks by their ranges.
 TEST_F(CliTest, HelpShowsFloatRanges) {
   const std::pair<std::string, std::vector<std::string>> commands[] = {
-      {"bake", {"--error-target FLOAT:0..1", "--resolution FLOAT:1e-6..1e5",
-                "--ao-distance FLOAT:1e-6..1e9", "--sky-intensity FLOAT:NUMBER >= 0"}},
-      {"render", {"--fov FLOAT:0.01..179", "--exposure FLOAT:-32..32=0",
-                  "--diff-scale FLOAT:1e-3..1e6=4"}},
+      {"bake",
+       {"--error-target FLOAT:0..1", "--resolution FLOAT:1e-6..1e5",
+        "--ao-distance FLOAT:1e-6..1e9", "--sky-intensity FLOAT:NUMBER >= 0"}},
+      {"render",
+       {"--fov FLOAT:0.01..179", "--exposure FLOAT:-32..32=0", "--diff-scale FLOAT:1e-3..1e6=4"}},
       {"probes bake", {"--footprint FLOAT:0..0.5", "--footprint-max-radius FLOAT:METRES > 0"}},
-      {"probes place", {"--min-distance FLOAT:NUMBER > 0=0.1", "--floor-height FLOAT:0..100",
-                        "--target-error FLOAT:NUMBER >= 0"}},
+      {"probes place",
+       {"--min-distance FLOAT:NUMBER > 0=0.1", "--floor-height FLOAT:0..100",
+        "--target-error FLOAT:NUMBER >= 0"}},
       {"probes lppv", {"--samples-per-spacing FLOAT:NUMBER > 0=1"}},
   };
   for (const auto& [command, lines] : commands) {
@@ -245,8 +257,8 @@ TEST_F(CliTest, HelpShowsFloatRanges) {
 // NaN and infinities are usage errors (exit 2) whose message names the option.
 TEST_F(CliTest, HandParsedNumbersRejectNanAndInfinities) {
   const std::string bake = "bake " + dir + "/missing.gltf --out " + dir + "/out -q ";
-  const std::string render = "render " + dir + "/missing.gltf --mode reference --out " + dir +
-                             "/r.png -q ";
+  const std::string render =
+      "render " + dir + "/missing.gltf --mode reference --out " + dir + "/r.png -q ";
   const std::string place = "probes place " + dir + "/missing.gltf --out " + dir + "/p.json -q ";
   const std::string lppv = "probes lppv " + dir + "/missing.kprobe --out " + dir + "/l ";
   const std::string query = "probes query " + dir + "/missing.kprobe ";
@@ -262,8 +274,8 @@ TEST_F(CliTest, HandParsedNumbersRejectNanAndInfinities) {
     rows.push_back({render + "--look-from 0,0,1 --look-at " + bad + ",0,0", "--look-at " + bad});
     rows.push_back({place + "--volume 0,0,0,1," + bad + ",1", "--volume 0,0,0,1," + bad});
     rows.push_back({lppv + "--bounds 0,0,0,1,1," + bad, "--bounds: expected"});
-    rows.push_back({lppv + "--bounds 0,0,0,1,1,1 --resolution " + bad + ",2,2",
-                    "--resolution: expected"});
+    rows.push_back(
+        {lppv + "--bounds 0,0,0,1,1,1 --resolution " + bad + ",2,2", "--resolution: expected"});
     // "--": a positional "-inf" would otherwise read as an option.
     rows.push_back({query + "-- 0 " + bad + " 0", "probes query: the point must be finite"});
     rows.push_back({query + "-- 0 0 0 0 " + bad + " 0",
@@ -277,8 +289,8 @@ TEST_F(CliTest, HandParsedNumbersRejectNanAndInfinities) {
   for (const Row& row : rows) {
     std::string out;
     EXPECT_EQ(run(row.args, &out), 2) << row.args << "\n" << out;
-    EXPECT_NE(out.find("kiln: error: " + row.message), std::string::npos)
-        << row.args << "\n" << out;
+    EXPECT_NE(out.find("kiln: error: " + row.message), std::string::npos) << row.args << "\n"
+                                                                          << out;
   }
 }
 
