@@ -1,11 +1,14 @@
 // cli_test.cpp: the `kiln` executable as a user runs it: exit codes (0 ok, 1 bad input,
-// 2 bad usage), "kiln: error:" messages naming the file, --help on every subcommand, and
-// `kiln info` in text and JSON.
+// 2 bad usage), "kiln: error:" messages naming the file, --help on every subcommand,
+// `kiln info` in text and JSON, and NaN and infinities refused by every floating-point option.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "tests/test_util.h"
 
@@ -154,6 +157,141 @@ TEST_F(CliTest, HelpAndVersion) {
   EXPECT_NE(out.find("--json"), std::string::npos) << out;
   EXPECT_EQ(run("--version", &out), 0) << out;
   EXPECT_NE(out.find("kiln "), std::string::npos) << out;
+}
+
+// Every floating-point option checked by CLI11 (finiteNumberValidator, cli_common.h): NaN and
+// both infinities are usage errors (exit 2) whose message names the option and the value, as
+// is a number just past the range; a value at the range's edge passes the check, and the
+// command then fails on its missing input (exit 1) instead, so that no row bakes anything.
+TEST_F(CliTest, FloatOptionsRejectNanAndInfinities) {
+  const std::string bake = "bake " + dir + "/missing.gltf --out " + dir + "/out -q";
+  const std::string render =
+      "render " + dir + "/missing.gltf --mode reference --out " + dir + "/r.png -q";
+  const std::string compare =
+      "render --compare " + dir + "/missing_a.png " + dir + "/missing_b.png --out " + dir + "/";
+  const std::string probes = "probes bake " + dir + "/missing.gltf --out " + dir + "/p.kprobe -q";
+  const std::string place = "probes place " + dir + "/missing.gltf --out " + dir + "/p.json -q";
+  const std::string comparePlacement = "probes compare-placement " + dir + "/missing.gltf -q";
+  const std::string lppv =
+      "probes lppv " + dir + "/missing.kprobe --bounds 0,0,0,1,1,1 --out " + dir + "/l";
+  const std::string sky = " --sky 1,1,1";
+  // Per command: {option, a value at the edge of its range, a finite value past it}.
+  struct Check {
+    std::string option, edge, outside;
+  };
+  const std::pair<std::string, std::vector<Check>> commands[] = {
+      // 1e5001 overflows to infinity; 3.5e38 is beyond a float (it would read as infinity).
+      {bake,
+       {{"--error-target", "1", "1.0001"},
+        {"--resolution", "1e-6", "1e5001"},
+        {"--resolution", "1e5", "100001"},
+        {"--ao-amount", "1", "-0.001"},
+        {"--ao-distance", "1e-6", "2e9"}}},
+      {bake + sky, {{"--sky-intensity", "0", "-1e-9"}}},
+      {render,
+       {{"--fov", "0.01", "179.5"}, {"--fov", "179", "0.009"}, {"--exposure", "-32", "32.5"}}},
+      {render + sky, {{"--sky-intensity", "3.4e38", "3.5e38"}}},
+      {compare, {{"--diff-scale", "1e-3", "2e6"}}},
+      {probes,
+       {{"--visibility-max-distance", "1e9", "-1"},
+        {"--footprint", "0.5", "0.51"},
+        {"--footprint-max-radius", "1e6", "0"}}},
+      {probes + sky, {{"--sky-intensity", "0", "-1"}}},
+      {place + sky,
+       {{"--min-distance", "1e-30", "0"},
+        {"--spacing", "0", "3.5e38"},
+        {"--leak-weight", "0", "-1"},
+        {"--floor-height", "100", "100.5"},
+        {"--target-error", "0", "-0.5"},
+        {"--sky-intensity", "0", "-1"}}},
+      {comparePlacement, {{"--min-distance", "3.4e38", "-1"}, {"--floor-height", "0", "-1"}}},
+      {lppv, {{"--samples-per-spacing", "1e-300", "0"}}},
+  };
+  struct Row {
+    std::string command, option, edge, outside;
+  };
+  std::vector<Row> rows;
+  for (const auto& [command, checks] : commands)
+    for (const Check& c : checks) rows.push_back({command, c.option, c.edge, c.outside});
+  for (const Row& row : rows) {
+    for (const std::string& bad : {std::string("nan"), std::string("inf"), std::string("-inf"),
+                                   std::string("NaN"), row.outside}) {
+      const std::string args = row.command + " " + row.option + " " + bad;
+      std::string out;
+      EXPECT_EQ(run(args, &out), 2) << args << "\n" << out;
+      EXPECT_NE(out.find("kiln: error: " + row.option + ": must be "), std::string::npos)
+          << args << "\n"
+          << out;
+      EXPECT_NE(out.find("got '" + bad + "'"), std::string::npos) << args << "\n" << out;
+    }
+    const std::string args = row.command + " " + row.option + " " + row.edge;
+    std::string out;
+    EXPECT_EQ(run(args, &out), 1) << args << "\n" << out;
+    EXPECT_NE(out.find("missing"), std::string::npos) << args << "\n" << out;
+    EXPECT_EQ(out.find("must be"), std::string::npos) << args << "\n" << out;
+  }
+}
+
+// --help describes the float options' checks by their ranges.
+TEST_F(CliTest, HelpShowsFloatRanges) {
+  const std::pair<std::string, std::vector<std::string>> commands[] = {
+      {"bake",
+       {"--error-target FLOAT:0..1", "--resolution FLOAT:1e-6..1e5",
+        "--ao-distance FLOAT:1e-6..1e9", "--sky-intensity FLOAT:NUMBER >= 0"}},
+      {"render",
+       {"--fov FLOAT:0.01..179", "--exposure FLOAT:-32..32=0", "--diff-scale FLOAT:1e-3..1e6=4"}},
+      {"probes bake", {"--footprint FLOAT:0..0.5", "--footprint-max-radius FLOAT:METRES > 0"}},
+      {"probes place",
+       {"--min-distance FLOAT:NUMBER > 0=0.1", "--floor-height FLOAT:0..100",
+        "--target-error FLOAT:NUMBER >= 0"}},
+      {"probes lppv", {"--samples-per-spacing FLOAT:NUMBER > 0=1"}},
+  };
+  for (const auto& [command, lines] : commands) {
+    std::string out;
+    EXPECT_EQ(run(command + " --help", &out), 0) << out;
+    for (const std::string& line : lines) EXPECT_NE(out.find(line), std::string::npos) << out;
+  }
+}
+
+// The numbers kiln parses itself (comma lists, "auto" or a number, positional coordinates):
+// NaN and infinities are usage errors (exit 2) whose message names the option.
+TEST_F(CliTest, HandParsedNumbersRejectNanAndInfinities) {
+  const std::string bake = "bake " + dir + "/missing.gltf --out " + dir + "/out -q ";
+  const std::string render =
+      "render " + dir + "/missing.gltf --mode reference --out " + dir + "/r.png -q ";
+  const std::string place = "probes place " + dir + "/missing.gltf --out " + dir + "/p.json -q ";
+  const std::string lppv = "probes lppv " + dir + "/missing.kprobe --out " + dir + "/l ";
+  const std::string query = "probes query " + dir + "/missing.kprobe ";
+  struct Row {
+    std::string args, message;
+  };
+  std::vector<Row> rows;
+  for (const std::string bad : {"nan", "inf", "-inf"}) {
+    rows.push_back({bake + "--min-object-texels " + bad, "--min-object-texels: expected"});
+    rows.push_back({bake + "--shadow-color 0," + bad + ",0", "--shadow-color '0," + bad});
+    rows.push_back({bake + "--sky 1,1," + bad, "--sky '1,1," + bad});
+    rows.push_back({render + "--look-from 0," + bad + ",1 --look-at 0,0,0", "--look-from 0,"});
+    rows.push_back({render + "--look-from 0,0,1 --look-at " + bad + ",0,0", "--look-at " + bad});
+    rows.push_back({place + "--volume 0,0,0,1," + bad + ",1", "--volume 0,0,0,1," + bad});
+    rows.push_back({lppv + "--bounds 0,0,0,1,1," + bad, "--bounds: expected"});
+    rows.push_back(
+        {lppv + "--bounds 0,0,0,1,1,1 --resolution " + bad + ",2,2", "--resolution: expected"});
+    // "--": a positional "-inf" would otherwise read as an option.
+    rows.push_back({query + "-- 0 " + bad + " 0", "probes query: the point must be finite"});
+    rows.push_back({query + "-- 0 0 0 0 " + bad + " 0",
+                    "probes query: the point must be finite and the normal finite"});
+  }
+  // Finite text that overflows a float is infinity too.
+  rows.push_back({render + "--look-from 0,1e39,1 --look-at 0,0,0", "--look-from 0,1e39"});
+  rows.push_back({place + "--volume 0,0,0,1,1e39,1", "--volume 0,0,0,1,1e39"});
+  rows.push_back({lppv + "--bounds 0,0,0,1,1,1e39", "--bounds: expected"});
+  rows.push_back({query + "0 1e39 0", "probes query: the point must be finite"});
+  for (const Row& row : rows) {
+    std::string out;
+    EXPECT_EQ(run(row.args, &out), 2) << row.args << "\n" << out;
+    EXPECT_NE(out.find("kiln: error: " + row.message), std::string::npos) << row.args << "\n"
+                                                                          << out;
+  }
 }
 
 }  // namespace

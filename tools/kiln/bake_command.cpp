@@ -319,7 +319,7 @@ void registerBakeCommand(CLI::App& app) {
                 "its own random numbers measures each texel's spread, and texels get paths in "
                 "proportion to it (at least the preset's minimum, 32 without one, at most "
                 "--samples); unbiased; 0 = off")
-      ->check(CLI::Range(0.0f, 1.0f));
+      ->check(finiteNumberValidator(0.0, false, 1.0, "a number from 0 to 1 (0 = off)", "0..1"));
   b->add_option("--bounce-cache", o->bounceCache,
                 "Final gather: a first pass of this many paths per texel, whose light the "
                 "bake's paths read at their first hit instead of tracing on; 0 = off")
@@ -339,7 +339,8 @@ void registerBakeCommand(CLI::App& app) {
               "footprint (for comparisons with renderers that bake hidden points black)");
   b->add_option("--resolution", o->resolution,
                 "Texels per world unit, before each object's scaleInLightmap")
-      ->check(CLI::Range(1e-6f, 1e5f));
+      ->check(finiteNumberValidator(1e-6, false, 1e5, "a number from 1e-6 to 1e5",
+                                    "1e-6..1e5"));
   b->add_option("--max-size", o->maxSize, "Largest lightmap page side, texels (default 1024)")
       ->check(CLI::Range(1, 16384));
   b->add_option("--min-object-texels", o->minObjectTexels,
@@ -371,10 +372,11 @@ void registerBakeCommand(CLI::App& app) {
   b->add_option("--ao-amount", o->aoAmount,
                 "Bake AO and apply it to the light map: light x (1 - A (1 - ao)), A in [0, 1] "
                 "(default: the scene's extras.kiln.aoAmount, else 0 = not applied)")
-      ->check(CLI::Range(0.0f, 1.0f));
+      ->check(finiteNumberValidator(0.0, false, 1.0, "a number from 0 to 1", "0..1"));
   b->add_option("--ao-distance", o->aoDistance,
                 "AO ray length in world units, > 0 (default: extras.kiln.aoMaxDistance, else 1)")
-      ->check(CLI::Range(1e-6f, 1e9f));
+      ->check(finiteNumberValidator(1e-6, false, 1e9, "a number of world units from 1e-6 to 1e9",
+                                    "1e-6..1e9"));
   b->add_option("--ldr", o->ldr,
                 "8-bit PNG pages, the output glTF's lightmap textures: dldr (default) or rgbm "
                 "(decode: docs)")

@@ -208,14 +208,11 @@ void addSkyOptions(CLI::App* command, SkyOptions& options) {
       "Equirectangular sky map (.hdr or .exr), replacing the scene's extras.kiln.sky");
   map->excludes(color);
   command->add_option("--sky-intensity", options.intensity,
-                      "Scale of --sky or --sky-map (default 1)");
+                      "Scale of --sky or --sky-map (default 1)")
+      ->check(nonNegativeNumberValidator());
 }
 
 int resolveSky(const SkyOptions& o, std::optional<Sky>* sky) {
-  if (o.intensity && (!std::isfinite(*o.intensity) || *o.intensity < 0.0f)) {
-    printError("--sky-intensity " + std::to_string(*o.intensity) + ": must be finite and >= 0");
-    return kExitBadUsage;
-  }
   if (o.intensity && !o.color && o.map.empty()) {
     printError("--sky-intensity needs --sky or --sky-map");
     return kExitBadUsage;
@@ -252,6 +249,14 @@ CLI::Validator finiteNumberValidator(double lo, bool loOpen, double hi, const st
         return "must be " + what + ", got '" + text + "'";
       },
       name);
+}
+
+CLI::Validator nonNegativeNumberValidator(double hi) {
+  return finiteNumberValidator(0.0, false, hi, "a finite number >= 0", "NUMBER >= 0");
+}
+
+CLI::Validator positiveNumberValidator(double hi) {
+  return finiteNumberValidator(0.0, true, hi, "a finite number > 0", "NUMBER > 0");
 }
 
 CLI::Validator visibilityResolutionValidator(const std::string& zero) {

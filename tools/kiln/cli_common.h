@@ -8,6 +8,7 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -88,9 +89,16 @@ int resolveSky(const SkyOptions& options, std::optional<Sky>* sky);
 CLI::Validator visibilityResolutionValidator(const std::string& zero);
 // Checks a finite number in [lo, hi] (in (lo, hi] when loOpen); NaN and infinities fail
 // (CLI::Range lets NaN through: every comparison with it is false). The message is "must be
-// " + what + ", got '<text>'"; `name` is the validator's description in --help.
+// " + what + ", got '<text>'"; `name` is the validator's description in --help. Every
+// floating-point option of kiln is checked with it or the two below, never with CLI::Range,
+// CLI::NonNegativeNumber or CLI::PositiveNumber (the last two also let infinities through).
 CLI::Validator finiteNumberValidator(double lo, bool loOpen, double hi, const std::string& what,
                                      const std::string& name);
+// CLI::NonNegativeNumber and CLI::PositiveNumber without NaN and infinities, for a
+// floating-point option: a finite number in [0, hi] or (0, hi]; hi is the largest finite value
+// of the option's type (a float's by default: a larger number would read as infinity).
+CLI::Validator nonNegativeNumberValidator(double hi = std::numeric_limits<float>::max());
+CLI::Validator positiveNumberValidator(double hi = std::numeric_limits<float>::max());
 
 void registerInfoCommand(CLI::App& app);
 void registerBakeCommand(CLI::App& app);  // kiln bake (lightmaps)

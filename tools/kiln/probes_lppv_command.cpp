@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -44,7 +45,8 @@ struct LppvOptions {
   bool quiet = false;
 };
 
-// Comma-separated finite numbers; nullopt when the text is not exactly `count` of them.
+// Comma-separated finite numbers, each within a float's range (the bounds are floats: a larger
+// number would read as infinity); nullopt when the text is not exactly `count` of them.
 std::optional<std::vector<double>> parseNumbers(const std::string& text, size_t count) {
   std::vector<double> values;
   std::stringstream in(text);
@@ -57,7 +59,8 @@ std::optional<std::vector<double>> parseNumbers(const std::string& text, size_t 
     } catch (...) {
       return std::nullopt;
     }
-    if (used != item.size() || !std::isfinite(v)) return std::nullopt;
+    if (used != item.size() || !(std::fabs(v) <= std::numeric_limits<float>::max()))
+      return std::nullopt;
     values.push_back(v);
   }
   if (values.size() != count || (!text.empty() && text.back() == ',')) return std::nullopt;
@@ -203,7 +206,7 @@ void registerProbesLppvCommand(CLI::App& probes) {
       ->required();
   c->add_option("--samples-per-spacing", o->samplesPerSpacing,
                 "Auto resolution: grid samples per mean probe spacing")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumberValidator(std::numeric_limits<double>::max()))
       ->capture_default_str();
   c->add_option("--max-resolution", o->maxResolution, "Auto resolution: cap per axis")
       ->check(CLI::Range(1, kLppvMaxAxis))

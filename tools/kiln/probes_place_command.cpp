@@ -34,7 +34,7 @@ using Json = nlohmann::json;
 
 Json vecJson(vec3 v) { return Json::array({v.x, v.y, v.z}); }
 
-// "minx,miny,minz,maxx,maxy,maxz" -> Bounds3.
+// "minx,miny,minz,maxx,maxy,maxz" -> Bounds3 (finite floats, min < max).
 std::optional<Bounds3> parseVolume(const std::string& text) {
   std::stringstream ss(text);
   std::string item;
@@ -85,7 +85,7 @@ int makeSettings(const CommonOptions& o, ProbePlacementSettings* s) {
     std::optional<Bounds3> b = parseVolume(o.volumes[i]);
     if (!b) {
       printError("--volume " + o.volumes[i] +
-                 ": expected minx,miny,minz,maxx,maxy,maxz with min < max");
+                 ": expected minx,miny,minz,maxx,maxy,maxz (6 finite numbers) with min < max");
       return kExitBadUsage;
     }
     s->volumes.push_back(*b);
@@ -112,7 +112,7 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
   c->add_option("--volume", o->volumes,
                 "minx,miny,minz,maxx,maxy,maxz (repeatable); default: the static objects' bounds");
   c->add_option("--min-distance", o->minDistance, "Closest a probe may be to a surface (m)")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumberValidator())
       ->capture_default_str();
   c->add_option("--rays", o->rays, "Rays per cheap bake (candidates and check points)")
       ->check(CLI::Range(1, 1 << 20))
@@ -121,13 +121,13 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   c->add_option("--spacing", o->spacing, "Base octree spacing in m (0 = from the budget)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumberValidator());
   c->add_option("--depth", o->depth, "Octree levels below the base spacing")
       ->check(CLI::Range(0, 6))
       ->capture_default_str();
   c->add_option("--leak-weight", o->leakWeight,
                 "Weight of the leak estimate (cells spanning walls) in a set's score (0 = off)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(nonNegativeNumberValidator())
       ->capture_default_str();
   c->add_option("--visibility-resolution", o->visibilityResolution,
                 "Side of the visibility maps the cheap bakes record, so that sets are scored "
@@ -138,7 +138,8 @@ void addCommonOptions(CLI::App* c, CommonOptions* o) {
   c->add_option("--floor-height", o->floorHeight,
                 "Height (m) of the first layer of candidates above walkable surfaces, with "
                 "sparser layers above it (0 = octree corners only)")
-      ->check(CLI::Range(0.0f, 100.0f))
+      ->check(finiteNumberValidator(0.0, false, 100.0, "a number of metres from 0 to 100",
+                                    "0..100"))
       ->capture_default_str();
   c->add_flag("--hold-out", o->holdOut,
               "Growth picks from half of the check points and the other half scores the sets "
@@ -605,7 +606,7 @@ void registerProbesPlaceCommand(CLI::App& probes) {
       ->capture_default_str();
   p->add_option("--target-error", place->targetError,
                 "Stop at this score: mean relative check error + leak estimate (0 = off)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumberValidator());
   p->add_flag("--no-prune", place->noPrune, "Do not remove probes that add nothing");
   p->callback(commandCallback([place]() { return runPlace(*place); }));
 

@@ -301,14 +301,15 @@ void registerRenderCommand(CLI::App& app) {
   r->add_option("--look-from", o->lookFrom, "Camera position X,Y,Z (with --look-at)");
   r->add_option("--look-at", o->lookAt, "Point the camera looks at X,Y,Z");
   r->add_option("--fov", o->fov, "Vertical field of view, degrees (default 50)")
-      ->check(CLI::Range(0.01f, 179.0f));
+      ->check(finiteNumberValidator(0.01, false, 179.0, "a number of degrees from 0.01 to 179",
+                                    "0.01..179"));
   r->add_option("--size", o->size,
                 "Image size W,H (default 480 wide, height from the camera's aspect or 4:3)");
   r->add_option("--spheres", o->spheres,
                 "JSON {\"spheres\": [{\"center\": [x,y,z], \"radius\": r, \"albedo\": [r,g,b], "
                 "\"lppv\": false}]}: dynamic probe-lit spheres");
   r->add_option("--exposure", o->exposure, "Exposure in EV (x 2^EV before the tone map)")
-      ->check(CLI::Range(-32.0f, 32.0f))
+      ->check(finiteNumberValidator(-32.0, false, 32.0, "a number of EV from -32 to 32", "-32..32"))
       ->capture_default_str();
   r->add_option("--mode", o->mode, "preview (baked data) or reference (path traced)")
       ->check(CLI::IsMember({"preview", "reference"}))
@@ -329,7 +330,7 @@ void registerRenderCommand(CLI::App& app) {
                 "difference; prints the mean absolute and relative mean difference")
       ->expected(2);
   r->add_option("--diff-scale", o->diffScale, "--compare: difference image = |A - B| x this")
-      ->check(CLI::Range(1e-3f, 1e6f))
+      ->check(finiteNumberValidator(1e-3, false, 1e6, "a number from 1e-3 to 1e6", "1e-3..1e6"))
       ->capture_default_str();
   addSkyOptions(r, o->sky);
   r->add_flag("--quiet,-q", o->quiet, "No progress or summary on stderr");
