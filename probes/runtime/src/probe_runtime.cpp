@@ -1166,6 +1166,19 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
     const ShL2Rgb& src = s.sh[size_t(loc.probes[k])];
     for (int i = 0; i < kShL2Count; ++i) r.c[i] += w * src.c[i];
   }
+  // The sun layer (kiln/probe_set.h): the light's share as the cell's ramp gives it at the
+  // point, in place of the weights' mix of the probes' shares.
+  if (!s.sun.empty() && !s.isOuter(loc.cell) && size_t(loc.cell) < s.sun.ramps.size()) {
+    const glm::vec4 a = s.sun.ramps[size_t(loc.cell)];
+    if (!std::isnan(a.x)) {
+      const float ramp = loc.barycentric[0] * a.x + loc.barycentric[1] * a.y +
+                         loc.barycentric[2] * a.z + loc.barycentric[3] * a.w;
+      float mixed = 0.0f;
+      for (int k = 0; k < 4; ++k) mixed += loc.weights[k] * s.sun.visibility[size_t(loc.probes[k])];
+      const float d = std::clamp(ramp, 0.0f, 1.0f) - mixed;
+      for (int i = 0; i < kShL2Count; ++i) r.c[i] += d * s.sun.sh.c[i];
+    }
+  }
   return r;
 }
 

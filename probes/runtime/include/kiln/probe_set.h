@@ -97,6 +97,27 @@ struct ProbeVisibility {
   }
 };
 
+// The sun layer (docs/probes.md, "Sun shadows"): sharp shadow edges of one baked directional
+// light for objects lit by the probes. A probe's SH holds that light's direct light times
+// visibility[i], the share of the light reaching probe i unblocked (in [0, 1]); blended, the
+// light's share is the weights' mix of those, which smears a shadow edge over the cells that
+// straddle it. The shadow of a straight edge under a directional light is bounded by a plane
+// that contains the light's direction, so in a tetrahedron the light's share is well described
+// by a ramp across one plane: S(p) = clamp(dot(b, ramps[cell]), 0, 1), where b is p's
+// barycentric coordinates in the cell and ramps[cell][k] the ramp's (unclamped) value at the
+// cell's vertex k. The blend replaces the mixed share by S: sh += (S - sum_k w_k
+// visibility[probe_k]) * this->sh, where this->sh is the light's direct light at a fully lit
+// point. ramps[cell].x NaN = no ramp (the plain blend: edges that no plane fits, such as
+// corners and stripes, or cells the light's share does not vary in). Outer cells have none.
+struct ProbeSunLayer {
+  int32_t light = -1;  // the scene light (KHR_lights_punctual index); -1 = no layer
+  ShL2Rgb sh;          // radiance SH of the light's direct light on a fully lit probe
+  std::vector<float> visibility;  // per probe, in [0, 1]
+  std::vector<glm::vec4> ramps;   // per inner cell (dimension 3), see above
+
+  bool empty() const { return light < 0; }
+};
+
 // What one step of the walk through a tetrahedron reads, in one 64-byte record (derived from
 // positions and cells by prepareProbeLookup; not stored in the .kprobe file): the barycentric
 // coordinates of p in float, l_k = c_k + x[k] q.x + y[k] q.y + z[k] q.z with q = p - origin,
@@ -132,6 +153,7 @@ struct ProbeSet {
   std::vector<glm::vec4> occlusion;
   std::array<int32_t, kProbeOcclusionChannels> occlusionLights{-1, -1, -1, -1};
   ProbeVisibility visibility;  // empty = blend by barycentric weights alone
+  ProbeSunLayer sun;           // empty = no sharp sun shadows
   // Derived walk records, one per inner cell (dimension 3): filled by prepareProbeLookup,
   // which buildProbeTopology and the .kprobe readers call. Empty (or stale in size) = the
   // lookup walks with the exact predicates alone. Call prepareProbeLookup again after
