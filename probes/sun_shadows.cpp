@@ -31,6 +31,7 @@ constexpr uint32_t kDirections = 36;      // plane normals searched, 5 degrees a
 constexpr uint32_t kEdgePoints = 6;       // bisections locating the edge
 constexpr int kBisections = 14;           // each: the edge to 1/16384 of its bracket
 constexpr float kKeepRatio = 0.8f;        // the ramp's error at most this x the plain blend's
+constexpr float kMaxPointError = 0.25f;   // the ramp's error at any sampled point, at most
 constexpr std::array<float, 7> kWidths = {0.01f, 0.02f, 0.05f, 0.1f, 0.2f, 0.5f, 1.0f};
 
 // Uniform point of the tetrahedron: barycentric weights from four exponentials (a flat
@@ -105,23 +106,25 @@ vec4 fitSunRamp(const Integrator& integrator, uint32_t light, const std::array<v
     }
     return out;
   };
-  const std::vector<Sample> train = draw(0);
+  // The interior points, then the four probes with their shares (which the SH holds: the
+  // mean over a footprint for a probe baked over one).
+  std::vector<Sample> train = draw(0);
+  for (int k = 0; k < 4; ++k) {
+    Sample vertex{{0.0f, 0.0f, 0.0f, 0.0f}, corners[size_t(k)], shares[size_t(k)]};
+    vertex.b[size_t(k)] = 1.0f;
+    train.push_back(vertex);
+  }
   float lo = 1.0f, hi = 0.0f;
   for (const Sample& x : train) {
     lo = std::min(lo, x.share);
     hi = std::max(hi, x.share);
   }
-  const float shareLo = std::min({shares[0], shares[1], shares[2], shares[3]});
-  const float shareHi = std::max({shares[0], shares[1], shares[2], shares[3]});
-  // The light's share does not vary in the cell, nor do the probes': the blend is exact.
-  if (hi - lo < 0.02f && shareHi - shareLo < 0.02f) return none;
+  // The light's share varies neither inside the cell nor between its probes: the blend is
+  // exact.
+  if (hi - lo < 0.02f) return none;
 
   vec4 candidate;
-  if (hi - lo < 0.02f) {
-    // Constant inside, though the probes differ (an edge through a corner of the cell).
-    const float m = 0.5f * (lo + hi);
-    candidate = vec4(m);
-  } else {
+  {
     // The best split along each normal perpendicular to the light.
     float bestCost = std::numeric_limits<float>::max(), bestThreshold = 0.0f;
     vec3 bestNormal = u;
@@ -155,38 +158,83 @@ vec4 fitSunRamp(const Integrator& integrator, uint32_t light, const std::array<v
         }
       }
     }
-    // The edge located by bisection along the normal, from the points nearest the split.
-    float tMin = std::numeric_limits<float>::max(), tMax = -tMin;
-    for (const Sample& x : train) {
-      tMin = std::min(tMin, glm::dot(bestNormal, x.p));
-      tMax = std::max(tMax, glm::dot(bestNormal, x.p));
-    }
-    const float bracket = 0.25f * (tMax - tMin);
-    std::vector<uint32_t> nearest(train.size());
-    std::iota(nearest.begin(), nearest.end(), 0u);
-    std::sort(nearest.begin(), nearest.end(), [&](uint32_t a, uint32_t b) {
-      const float da = std::abs(glm::dot(bestNormal, train[a].p) - bestThreshold);
-      const float db = std::abs(glm::dot(bestNormal, train[b].p) - bestThreshold);
-      return da < db;
-    });
-    std::vector<vec3> edge;
+    // The edge, in two rounds: points on it located by bisection from the shaded points
+    // nearest the current plane, each along its normal to a point a tenth of the cell beyond
+    // it (or, failing that, towards the nearest lit point), then the plane through them. The
+    // shaded points spread over the cell, so the edge points do too and fix the plane's
+    // direction; the second round starts from the first's plane (the search's normal can be
+    // far off when few points are lit: many splits then cost nothing).
+    float extent = 0.0f;
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b)
+        extent = std::max(extent, glm::distance(corners[size_t(a)], corners[size_t(b)]));
     uint64_t probeKey = hashValues(key, 0x5eedu);
-    for (uint32_t i = 0; i < nearest.size() && edge.size() < kEdgePoints; ++i) {
-      const vec3 p = train[nearest[i]].p;
-      const vec3 q0 = p + (bestThreshold - glm::dot(bestNormal, p)) * bestNormal;
-      vec3 shaded = q0 - bracket * bestNormal, lit = q0 + bracket * bestNormal;
-      if (share(shaded, probeKey++) > 0.5f || share(lit, probeKey++) < 0.5f) continue;
+    // Bisects the segment a-b when its ends differ (lit or not) and appends the edge point.
+    auto bisect = [&](vec3 a, vec3 b, std::vector<vec3>& edge) {
+      const bool litA = share(a, probeKey++) > 0.5f;
+      if (litA == (share(b, probeKey++) > 0.5f)) return;
       for (int k = 0; k < kBisections; ++k) {
-        const vec3 mid = 0.5f * (shaded + lit);
-        (share(mid, probeKey++) > 0.5f ? lit : shaded) = mid;
+        const vec3 mid = 0.5f * (a + b);
+        ((share(mid, probeKey++) > 0.5f) == litA ? a : b) = mid;
       }
-      edge.push_back(0.5f * (shaded + lit));
-    }
-    if (edge.empty()) return none;
+      edge.push_back(0.5f * (a + b));
+    };
     vec3 normal = bestNormal;
-    if (edge.size() >= 2) {
-      // The line through the edge points in the plane perpendicular to the light: the
-      // principal axis of their (u, v) coordinates; its perpendicular is the normal.
+    float offset = bestThreshold;
+    std::vector<vec3> edge;  // every point found is on the edge: kept over the rounds
+    for (int round = 0; round < 2; ++round) {
+      std::vector<uint32_t> shaded, lit;
+      for (uint32_t j = 0; j < train.size(); ++j) (train[j].share > 0.5f ? lit : shaded).push_back(j);
+      std::sort(shaded.begin(), shaded.end(), [&](uint32_t a, uint32_t b) {
+        return std::abs(glm::dot(normal, train[a].p) - offset) <
+               std::abs(glm::dot(normal, train[b].p) - offset);
+      });
+      const size_t before = edge.size();
+      for (uint32_t i = 0; i < shaded.size() && edge.size() < before + kEdgePoints; ++i) {
+        const vec3 p = train[shaded[i]].p;
+        bisect(p, p + (offset - glm::dot(normal, p) + 0.1f * extent) * normal, edge);
+      }
+      for (uint32_t i = 0; i < shaded.size() && edge.size() < before + 3; ++i) {
+        const vec3 p = train[shaded[i]].p;
+        uint32_t nearest = lit.empty() ? shaded[i] : lit[0];
+        for (uint32_t j : lit)
+          if (glm::distance(train[j].p, p) < glm::distance(train[nearest].p, p)) nearest = j;
+        bisect(p, train[nearest].p, edge);
+      }
+      // Points found from one lit point (a lit corner of the cell) lie on one line along the
+      // light and fix no direction: then the edge is also sought from the points of each
+      // class nearest the plane, along 8 directions perpendicular to the light.
+      auto spread = [&] {
+        glm::vec2 m(0.0f);
+        for (const vec3& e : edge) m += glm::vec2(glm::dot(u, e), glm::dot(v, e));
+        m /= float(std::max<size_t>(edge.size(), 1));
+        float sum = 0.0f;
+        for (const vec3& e : edge) {
+          const glm::vec2 d = glm::vec2(glm::dot(u, e), glm::dot(v, e)) - m;
+          sum += glm::dot(d, d);
+        }
+        return std::sqrt(sum / float(std::max<size_t>(edge.size(), 1)));
+      };
+      if (spread() <= 0.02f * extent) {
+        for (const std::vector<uint32_t>* side : {&lit, &shaded}) {
+          uint32_t nearest = uint32_t(-1);
+          for (uint32_t j : *side)
+            if (nearest == uint32_t(-1) ||
+                std::abs(glm::dot(normal, train[j].p) - offset) <
+                    std::abs(glm::dot(normal, train[nearest].p) - offset))
+              nearest = j;
+          if (nearest == uint32_t(-1)) continue;
+          for (int k = 0; k < 8; ++k) {
+            const float phi = float(kPi) * 0.25f * float(k);
+            const vec3 d = std::cos(phi) * u + std::sin(phi) * v;
+            bisect(train[nearest].p, train[nearest].p + extent * d, edge);
+          }
+        }
+      }
+      if (edge.empty()) return none;
+      // The line through the edge points in the plane perpendicular to the light (the
+      // principal axis of their (u, v) coordinates; its perpendicular is the normal) when
+      // they spread over more than 2% of the cell, else the current normal.
       glm::vec2 mean(0.0f);
       for (const vec3& e : edge) mean += glm::vec2(glm::dot(u, e), glm::dot(v, e));
       mean /= float(edge.size());
@@ -197,14 +245,25 @@ vec4 fitSunRamp(const Integrator& integrator, uint32_t light, const std::array<v
         sxy += d.x * d.y;
         syy += d.y * d.y;
       }
-      const float axis = 0.5f * std::atan2(2.0f * sxy, sxx - syy);  // the principal direction
-      const vec3 along = std::cos(axis) * u + std::sin(axis) * v;
-      normal = glm::normalize(glm::cross(s, along));
-      if (glm::dot(normal, bestNormal) < 0.0f) normal = -normal;  // lit side positive
+      const float minSpread = 0.02f * extent;
+      if (sxx + syy > minSpread * minSpread * float(edge.size())) {
+        const float axis = 0.5f * std::atan2(2.0f * sxy, sxx - syy);
+        const vec3 along = std::cos(axis) * u + std::sin(axis) * v;
+        const vec3 fitted = glm::normalize(glm::cross(s, along));
+        normal = glm::dot(fitted, normal) < 0.0f ? -fitted : fitted;  // lit side positive
+      }
+      offset = 0.0f;
+      for (const vec3& e : edge) offset += glm::dot(normal, e);
+      offset /= float(edge.size());
+      // Lit side positive, as the points say (the search's sign is a guess when many splits
+      // tie).
+      float agreement = 0.0f;
+      for (const Sample& x : train) agreement += (x.share - 0.5f) * (glm::dot(normal, x.p) - offset);
+      if (agreement < 0.0f) {
+        normal = -normal;
+        offset = -offset;
+      }
     }
-    float offset = 0.0f;
-    for (const vec3& e : edge) offset += glm::dot(normal, e);
-    offset /= float(edge.size());
     // The ramp's width: the one of kWidths that fits the training points best (a hard
     // shadow takes the narrowest; a penumbra a wider one).
     float width = kWidths[0], widthCost = std::numeric_limits<float>::max();
@@ -219,15 +278,31 @@ vec4 fitSunRamp(const Integrator& integrator, uint32_t light, const std::array<v
     }
     for (int k = 0; k < 4; ++k) candidate[k] = rampValue(normal, offset, width, corners[k]);
   }
-  // Kept only if clearly closer to the light's share than the plain blend, at fresh points.
+  // Kept only if it is right at every point, the training ones and fresh ones (a ramp wrong
+  // in part of the cell, such as a corner where a second edge cuts it, would light or shade
+  // an object there fully wrong), and clearly closer to the light's share than the plain
+  // blend at the fresh ones.
+  auto rampAt = [&](const Sample& x) {
+    const float r = x.b[0] * candidate.x + x.b[1] * candidate.y + x.b[2] * candidate.z +
+                    x.b[3] * candidate.w;
+    return std::clamp(r, 0.0f, 1.0f);
+  };
+  // A point inside the ramp's band (its value strictly between 0 and 1) is not judged: its
+  // share there depends on where in the penumbra it stands.
+  auto wrong = [&](const Sample& x) {
+    const float r = rampAt(x);
+    return (r == 0.0f || r == 1.0f) && std::abs(r - x.share) > kMaxPointError;
+  };
+  for (size_t j = 0; j < kSunRampSamples; ++j)  // the interior points (not the probes)
+    if (wrong(train[j])) return none;
   const std::vector<Sample> check = draw(kSunRampSamples);
   float rampError = 0.0f, blendError = 0.0f;
   for (const Sample& x : check) {
-    const float r = x.b[0] * candidate.x + x.b[1] * candidate.y + x.b[2] * candidate.z +
-                    x.b[3] * candidate.w;
     const float plain = x.b[0] * shares[0] + x.b[1] * shares[1] + x.b[2] * shares[2] +
                         x.b[3] * shares[3];
-    rampError += std::abs(std::clamp(r, 0.0f, 1.0f) - x.share);
+    if (wrong(x)) return none;
+    const float e = std::abs(rampAt(x) - x.share);
+    rampError += e;
     blendError += std::abs(plain - x.share);
   }
   return rampError < kKeepRatio * blendError ? candidate : none;

@@ -70,6 +70,7 @@ struct BakeOptions {
   float footprint = ProbeBakeSettings{}.footprint;          // 0 = a point bake
   float footprintMaxRadius = ProbeBakeSettings{}.footprintMaxRadius;
   bool footprintEverywhere = ProbeBakeSettings{}.footprintEverywhere;
+  bool noSunShadows = false;
   bool quiet = false;
   bool mpi = false;
   SkyOptions sky;
@@ -128,6 +129,7 @@ int runBake(const BakeOptions& options) {
   settings.footprint = o.footprint;
   settings.footprintMaxRadius = o.footprintMaxRadius;
   settings.footprintEverywhere = o.footprintEverywhere;
+  settings.sunShadows = !o.noSunShadows;
   if (!o.lightingMode.empty()) {
     Result<LightingMode> mode = parseLightingMode(o.lightingMode);
     if (!mode) {
@@ -175,6 +177,14 @@ int runBake(const BakeOptions& options) {
       }
     }
     std::cerr << "\n";
+    if (set->sun.empty()) {
+      std::cerr << "kiln: sun layer none ("
+                << (o.noSunShadows ? "--no-sun-shadows" : "no baked directional light") << ")\n";
+    } else {
+      std::cerr << "kiln: sun layer: light '" << scene.lights[size_t(set->sun.light)].name
+                << "', a shadow ramp in " << report.sunRampCells << " of " << set->innerCellCount
+                << " cells\n";
+    }
     const ProbeVisibility& vis = set->visibility;
     if (vis.empty()) {
       std::cerr << "kiln: visibility none (plain barycentric blending)\n";
@@ -497,6 +507,10 @@ void registerProbesCommand(CLI::App& app) {
                 "Largest footprint radius, metres")
       ->check(finiteNumberValidator(0.0, true, 1e6, "a finite number of metres > 0", "METRES > 0"))
       ->capture_default_str();
+  b->add_flag("--no-sun-shadows", bake->noSunShadows,
+              "No sun layer: objects lit by the probes get the brightest baked directional "
+              "light's shadow edges blended across each tetrahedron instead of sharp (see "
+              "docs/probes.md, \"Sun shadows\")");
   b->add_flag("--footprint-everywhere", bake->footprintEverywhere,
               "Bake every probe over its footprint, not only those in thin sheets of light or "
               "shade (smoother, but less accurate where light varies no faster than the probes)");
