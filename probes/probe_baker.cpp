@@ -468,7 +468,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     // irradiance is >= 0 for every normal, so adding it where the ramp lights a point more
     // than the probes' mix never makes the irradiance negative.
     sunDelta.addSample(-glm::normalize(light.direction), light.color * light.intensity, 1.0f);
-    set.sun.sh = settings.dering ? deringSh(sunDelta).sh : sunDelta;
+    set.sun.sh = sunDelta;
     set.sun.visibility.resize(count);
   }
   for (size_t i = 0; i < count; ++i) {
@@ -518,20 +518,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
                            (filled ? "; its SH is the mean of its valid neighbours'" : ""));
   }
 
-  if (settings.dering) {
-    if (sun >= 0) {
-      // With the layer a probe's SH is its other light, deringed, plus its share of the
-      // light's deringed lobe: sh_i = D(rest_i) + v_i L. The blend can then trade the probes'
-      // mix of shares for a ramp's and stay >= 0 for every normal (its sun part is S L with
-      // S in [0, 1], the rest a mix of deringed SH); deringing the sum (as without the layer)
-      // would leave each probe's part of L unknown.
-      for (size_t i = 0; i < count; ++i) set.sh[i] += (-set.sun.visibility[i]) * sunDelta;
-      rep.deringedProbes = deringProbeSh(set.sh, settings.threads);
-      for (size_t i = 0; i < count; ++i) set.sh[i] += set.sun.visibility[i] * set.sun.sh;
-    } else {
-      rep.deringedProbes = deringProbeSh(set.sh, settings.threads);
-    }
-  }
+  if (settings.dering) rep.deringedProbes = deringProbeSh(set.sh, settings.threads);
   if (sun >= 0 && set.dimension == 3) {
     std::optional<Progress> rampProgress;
     if (progress) rampProgress.emplace("sun ramps", size_t(set.innerCellCount), "cells");

@@ -32,6 +32,7 @@ constexpr uint32_t kEdgePoints = 6;       // bisections locating the edge
 constexpr int kBisections = 14;           // each: the edge to 1/16384 of its bracket
 constexpr float kKeepRatio = 0.8f;        // the ramp's error at most this x the plain blend's
 constexpr float kMaxPointError = 0.25f;   // the ramp's error at any sampled point, at most
+constexpr int kMaxWrongPoints = 3;       // of the 2 x kSunRampSamples interior points
 constexpr float kMinSpread = 0.02f;       // edge points spread over this x the cell fix a plane
 constexpr std::array<float, 7> kWidths = {0.01f, 0.02f, 0.05f, 0.1f, 0.2f, 0.5f, 1.0f};
 
@@ -303,11 +304,13 @@ class RampFit {
       const float r = rampAt(x);
       return (r == 0.0f || r == 1.0f) && std::abs(r - x.share) > kMaxPointError;
     };
+    int wrongPoints = 0;
     for (size_t j = 0; j < kSunRampSamples; ++j)  // the interior points (not the probes)
-      if (wrong(train_[j])) return false;
+      wrongPoints += wrong(train_[j]) ? 1 : 0;
     float rampError = 0.0f, blendError = 0.0f;
     for (const Sample& x : draw(kSunRampSamples)) {
-      if (wrong(x)) return false;
+      wrongPoints += wrong(x) ? 1 : 0;
+      if (wrongPoints > kMaxWrongPoints) return false;
       const float plain = x.b[0] * shares_[0] + x.b[1] * shares_[1] + x.b[2] * shares_[2] +
                           x.b[3] * shares_[3];
       rampError += std::abs(rampAt(x) - x.share);
