@@ -460,13 +460,12 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   }
 
   const int32_t sun = settings.sunShadows ? sunLayerLight(scene, integrator.settings()) : -1;
-  ShL2Rgb sunDelta;  // the light's raw delta, E Y_i(s)
+  ShL2Rgb sunDelta;
   if (sun >= 0) {
     set.sun.light = sun;
     const Light& light = scene.lights[size_t(sun)];
-    // The light's delta, c_i = E Y_i(s), deringed as a probe lit by it alone would be: its
-    // irradiance is >= 0 for every normal, so adding it where the ramp lights a point more
-    // than the probes' mix never makes the irradiance negative.
+    // The light's raw delta, c_i = E Y_i(s): what a probe's SH holds of the light before
+    // deringing (which the probes keep as before, on the sum; docs/probes.md, "Sun shadows").
     sunDelta.addSample(-glm::normalize(light.direction), light.color * light.intensity, 1.0f);
     set.sun.sh = sunDelta;
     set.sun.visibility.resize(count);
