@@ -751,7 +751,7 @@ TEST(ProbesCli, BakesTheScenesProbeGroups) {
 }
 
 // Visibility through the CLI on two_rooms with its 36 scene probes (3 x 2 x 3 per room): the
-// bake writes a version 3 file with 32 x 32 maps by default and none with
+// bake writes a version 4 file with 32 x 32 maps by default and none with
 // --visibility-resolution 0. At (4.45, 0.3, 1.5), 0.2 m into the dark room B from the shared
 // wall whose other side room A's sun lights, the point's cell is an outer cell reaching into
 // room A: the plain blend gives it room A's light (1.7 lux with TetGen's cells, 0.043 with
@@ -784,7 +784,7 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
             0)
       << log;
   EXPECT_NE(log.find("visibility none"), std::string::npos) << log;
-  // Header: version 3 either way (offset 4); the visibility resolution at offset 60.
+  // Header: version 4 either way (offset 4); the visibility resolution at offset 60.
   const std::string bytesVis = test::readTextFile(withVis),
                     bytesPlain = test::readTextFile(without);
   ASSERT_GE(bytesVis.size(), kProbeFileHeaderSize);
@@ -794,7 +794,7 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
     std::memcpy(&v, b.data() + at, 4);
     return v;
   };
-  EXPECT_EQ(u32(bytesVis, 4), 3u);
+  EXPECT_EQ(u32(bytesVis, 4), 4u);
   EXPECT_EQ(u32(bytesVis, 60), uint32_t(r));
   EXPECT_EQ(u32(bytesPlain, 60), 0u);
   // The maps are the only difference in size: 36 x (4 + 32^2 x 3 x 2) bytes.
