@@ -778,6 +778,8 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
                      "6148 bytes per probe"),
             std::string::npos)
       << log;
+  // The scene's sun is a baked directional light: the bake fills the sun layer.
+  EXPECT_NE(log.find("sun layer: light 'sun', "), std::string::npos) << log;
   ASSERT_EQ(test::runCommand(kiln() + "probes bake " + scene + " --out " + without +
                                  " --rays 4096 --threads 2 --visibility-resolution 0",
                              &log),
@@ -820,6 +822,30 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
     EXPECT_NEAR(x["visibilityMaxDistance"][i].get<double>(), glm::length(reach), 1e-4) << i;
   }
   EXPECT_FALSE(x.contains("visibilityMoments"));  // only with --visibility-moments
+  // The sun layer as the file holds it (version 4): light 0 ("sun"), a share per probe, a ramp
+  // or null per tetrahedron.
+  const Result<ProbeSet> visSet = loadProbeFile(withVis);
+  ASSERT_TRUE(visSet.ok()) << visSet.error();
+  const ProbeSunLayer& sun = visSet->sun;
+  EXPECT_EQ(sun.light, 0);
+  EXPECT_EQ(x["sunLight"].get<int>(), sun.light);
+  ASSERT_EQ(x["sunVisibility"].size(), 36u);
+  for (size_t i = 0; i < 36; ++i)
+    EXPECT_EQ(x["sunVisibility"][i].get<float>(), sun.visibility[i]) << i;
+  EXPECT_EQ(x["sunRampCount"].get<size_t>(), sun.ramps.size());
+  ASSERT_EQ(x["sunRamps"].size(), sun.ramps.size());
+  int fitted = 0;
+  for (size_t c = 0; c < sun.ramps.size(); ++c) {
+    const Json& a = x["sunRamps"][c];
+    if (std::isnan(sun.ramps[c].x)) {
+      EXPECT_TRUE(a.is_null()) << c;
+    } else {
+      ++fitted;
+      ASSERT_EQ(a.size(), 4u) << c;
+      for (int k = 0; k < 4; ++k) EXPECT_EQ(a[k].get<float>(), sun.ramps[c][k]) << c;
+    }
+  }
+  EXPECT_EQ(x["sunRampsFitted"].get<int>(), fitted);
   ASSERT_EQ(test::runCommand(kiln() + "probes export " + withVis + " --visibility-moments --out " +
                                  dir + "/m.json",
                              &log),
