@@ -897,7 +897,9 @@ TEST(ProbeSunFile, EveryLayerRuleIsCheckedAndNamed) {
     change(s);
     const Status st = validateProbeSet(s, "mem");
     EXPECT_FALSE(st.ok()) << field;
-    if (!st.ok()) EXPECT_EQ(st.error().rfind("mem: " + field, 0), 0u) << st.error();
+    if (!st.ok()) {
+      EXPECT_EQ(st.error().rfind("mem: " + field, 0), 0u) << st.error();
+    }
     if (viaFile) {
       const std::string e = parseError(serializeProbeSet(s));
       EXPECT_EQ(e.rfind("bad.kprobe: ", 0), 0u) << e;
