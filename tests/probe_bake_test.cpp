@@ -846,6 +846,13 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
     }
   }
   EXPECT_EQ(x["sunRampsFitted"].get<int>(), fitted);
+  // Unity's SH9 constants cannot hold the layer: --unity exports the probes' SH alone.
+  ASSERT_EQ(test::runCommand(kiln() + "probes export " + withVis + " --unity --out " + dir +
+                                 "/u.json",
+                             &log),
+            0)
+      << log;
+  EXPECT_EQ(Json::parse(test::readTextFile(dir + "/u.json"))["sh9"].size(), 36u);
   ASSERT_EQ(test::runCommand(kiln() + "probes export " + withVis + " --visibility-moments --out " +
                                  dir + "/m.json",
                              &log),
