@@ -293,6 +293,20 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
 // the data (one per inner cell: a 100k-probe set has over half a million).
 bool rampsValid(const glm::vec4* ramps, size_t count) {
   bool ok = true;
+#ifdef __SSE2__
+  // The four lanes at once: exponent bits all set (an infinity or NaN), and of those the NaNs
+  // (mantissa not zero); a ramp is fine with no such lane or four NaNs.
+  const __m128i exponent = _mm_set1_epi32(0x7f800000), mantissa = _mm_set1_epi32(0x007fffff);
+  const __m128i zero = _mm_setzero_si128();
+  for (size_t c = 0; c < count; ++c) {
+    const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&ramps[c]));
+    const __m128i special = _mm_cmpeq_epi32(_mm_and_si128(b, exponent), exponent);
+    const __m128i nan = _mm_andnot_si128(_mm_cmpeq_epi32(_mm_and_si128(b, mantissa), zero), special);
+    const int s = _mm_movemask_ps(_mm_castsi128_ps(special));
+    const int n = _mm_movemask_ps(_mm_castsi128_ps(nan));
+    ok &= (s == 0) | (n == 0xf);
+  }
+#else
   for (size_t c = 0; c < count; ++c) {
     uint32_t bits[4];
     std::memcpy(bits, &ramps[c], 16);
@@ -304,6 +318,7 @@ bool rampsValid(const glm::vec4* ramps, size_t count) {
     }
     ok &= special == 0 || nan == 4;
   }
+#endif
   return ok;
 }
 
