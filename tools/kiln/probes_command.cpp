@@ -200,13 +200,6 @@ int runBake(const BakeOptions& options) {
                         : " (to the farthest corner of the scene and probes)")
                 << "\n";
     }
-    if (set->sun.empty()) {
-      std::cerr << "kiln: sun layer none\n";
-    } else {
-      std::cerr << "kiln: sun layer: light '" << scene.lights[size_t(set->sun.light)].name
-                << "', " << report.sunRampCells << " of " << set->innerCellCount
-                << " cells with a shadow ramp\n";
-    }
   }
   return kExitOk;
 }
