@@ -359,6 +359,28 @@ Json exportJson(const ProbeSet& s, bool withMoments) {
   Json cells = Json::array();
   for (const glm::ivec4& c : s.cells) cells.push_back({c[0], c[1], c[2], c[3]});
   j["cells"] = std::move(cells);
+  const ProbeSunLayer& sun = s.sun;
+  j["sunConvention"] =
+      "the sun layer (kiln/probe_set.h ProbeSunLayer): sunLight is the baked directional light "
+      "(scene light index, -1 = no layer) whose direct light sunSh holds at a fully lit point "
+      "(radiance SH as sh); sunVisibility per probe the share of it that reaches the probe, "
+      "in [0, 1]; sunRamps per inner cell the ramp's values at the cell's 4 vertices, or null "
+      "for no ramp (sunRampCount ramps, 0 or innerCellCount; sunRampsFitted not null)";
+  j["sunLight"] = sun.light;
+  if (!sun.empty()) {
+    j["sunSh"] = shJson(sun.sh);
+    Json visibility = Json::array(), ramps = Json::array();
+    for (float v : sun.visibility) visibility.push_back(shortest(v));
+    int32_t fitted = 0;
+    for (const glm::vec4& a : sun.ramps) {
+      fitted += std::isnan(a.x) ? 0 : 1;
+      ramps.push_back(std::isnan(a.x) ? Json(nullptr) : vec4Json(a));
+    }
+    j["sunVisibility"] = std::move(visibility);
+    j["sunRampCount"] = sun.ramps.size();
+    j["sunRampsFitted"] = fitted;
+    j["sunRamps"] = std::move(ramps);
+  }
   return j;
 }
 

@@ -9,7 +9,7 @@
  * floats, coefficient-major with RGB innermost: sh[3 * i + channel], i = l(l + 1) + m in the
  * real orthonormal basis, holding RADIANCE. Irradiance is E (not E / pi).
  *
- * Leak-free blending: files baked with per-probe visibility (version 3, the default of
+ * Leak-free blending: files baked with per-probe visibility (version 3 on, the default of
  * `kiln probes bake`) let a lookup weight each probe of the cell by whether it can see the
  * point (a Chebyshev test on the depths its bake rays reached), so light does not pass
  * through a wall between probes on both sides of it. kiln_probes_locate and
