@@ -276,7 +276,11 @@ class RampFit {
   // shadow takes the narrowest, a penumbra a wider one): its values at the four vertices.
   vec4 rampWithBestWidth() const {
     float width = kWidths[0], widthCost = std::numeric_limits<float>::max();
+    // A hard shadow has no penumbra: only the narrowest ramp (a wider one would pass for
+    // light and shade finer than itself, such as stripes).
+    const bool hard = !(integrator_.scene().lights[light_].shadowAngle > 0.0f);
     for (float w : kWidths) {
+      if (hard && w > kWidths[0]) break;
       float c = 0.0f;
       for (const Sample& x : train_)
         c += std::abs(std::clamp(rampValue(normal_, offset_, w, x.p), 0.0f, 1.0f) - x.share);
@@ -294,7 +298,8 @@ class RampFit {
   // wrong in part of the cell, such as a corner where a second edge cuts it, would light or
   // shade an object there fully wrong), and clearly closer to the light's share than the
   // plain blend at the fresh ones. A point inside the ramp's band (its value strictly
-  // between 0 and 1) is not judged: its share depends on where in the penumbra it stands.
+  // between 0 and 1) is judged more loosely: its share depends on where in the penumbra it
+  // stands.
   bool validate(const vec4& ramp) const {
     auto rampAt = [&](const Sample& x) {
       return std::clamp(x.b[0] * ramp.x + x.b[1] * ramp.y + x.b[2] * ramp.z + x.b[3] * ramp.w,
@@ -302,7 +307,8 @@ class RampFit {
     };
     auto wrong = [&](const Sample& x) {
       const float r = rampAt(x);
-      return (r == 0.0f || r == 1.0f) && std::abs(r - x.share) > kMaxPointError;
+      const bool inBand = r > 0.0f && r < 1.0f;
+      return std::abs(r - x.share) > (inBand ? 2.0f * kMaxPointError : kMaxPointError);
     };
     int wrongPoints = 0;
     for (size_t j = 0; j < kSunRampSamples; ++j)  // the interior points (not the probes)

@@ -47,12 +47,12 @@ struct SunWorld {
     test::addQuad(scene, "ground", vec3(-30, 0, 30), vec3(30, 0, 30), vec3(30, 0, -30),
                   vec3(-30, 0, -30), grey);
     if (slatGap > 0.0f) {
-      // A roof of slats along z, each slatGap wide with slatGap between: striped shade that
-      // no single plane bounds.
+      // A roof of thin slats (2 cm) along z, each slatGap wide with slatGap between: stripes
+      // of light and shade about slatGap wide each, which no single plane bounds.
       for (int k = 0; k < 40; ++k) {
         const float x1 = -2.0f * slatGap * float(k);
         test::addBox(scene, "slat" + std::to_string(k), vec3(x1 - slatGap, 3.0f, -30.0f),
-                     vec3(x1, 3.2f, 30.0f), grey, false);
+                     vec3(x1, 3.02f, 30.0f), grey, false);
       }
     } else {
       test::addBox(scene, "roof", vec3(-30.0f, 3.0f, -30.0f), vec3(0.0f, 3.2f, 30.0f), grey,

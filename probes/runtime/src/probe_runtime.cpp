@@ -1173,9 +1173,19 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
     if (!std::isnan(a.x)) {
       const float ramp = loc.barycentric[0] * a.x + loc.barycentric[1] * a.y +
                          loc.barycentric[2] * a.z + loc.barycentric[3] * a.w;
-      float mixed = 0.0f;
-      for (int k = 0; k < 4; ++k) mixed += loc.weights[k] * s.sun.visibility[size_t(loc.probes[k])];
-      const float d = std::clamp(ramp, 0.0f, 1.0f) - mixed;
+      // The ramp is geometry-blind: across a wall it would light a closed room. So it only
+      // chooses within the shares of the probes that see the point (visibility weight at
+      // least a tenth of the barycentric one; every probe with the plain blend).
+      float mixed = 0.0f, lo = 1.0f, hi = 0.0f;
+      for (int k = 0; k < 4; ++k) {
+        const float v = s.sun.visibility[size_t(loc.probes[k])];
+        mixed += loc.weights[k] * v;
+        if (loc.weights[k] > 0.0f && loc.weights[k] >= 0.1f * loc.barycentric[k]) {
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        }
+      }
+      const float d = lo <= hi ? std::clamp(ramp, lo, hi) - mixed : 0.0f;
       for (int i = 0; i < kShL2Count; ++i) r.c[i] += d * s.sun.sh.c[i];
     }
   }
