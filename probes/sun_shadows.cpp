@@ -85,10 +85,6 @@ class RampFit {
     // The light's share varies neither inside the cell nor between its probes: the blend is
     // exact.
     if (!sharesDiffer()) return none;
-    // A cell across a wall (an edge between two of its probes blocked) gets none: its points
-    // on the wall's far side lie in other light, which no ramp of this light describes, and
-    // the plain blend would carry the ramp through the wall.
-    if (crossesGeometry()) return none;
     searchSplit();
     if (!fitEdge()) return none;
     const vec4 candidate = rampWithBestWidth();
@@ -118,16 +114,6 @@ class RampFit {
       vertex.b[size_t(k)] = 1.0f;
       train_.push_back(vertex);
     }
-  }
-
-  bool crossesGeometry() const {
-    const Tracer& tracer = integrator_.tracer();
-    for (int a = 0; a < 4; ++a)
-      for (int b = a + 1; b < 4; ++b)
-        if (tracer.occluded(Ray{corners_[size_t(a)], corners_[size_t(b)] - corners_[size_t(a)],
-                                0.0f, 1.0f}))
-          return true;
-    return false;
   }
 
   bool sharesDiffer() const {

@@ -882,7 +882,13 @@ TEST(ProbeSunFile, Version3FileHasNoSunLayer) {
     const ShL2Rgb a = interpolateProbes(*r, locateProbe(*r, p));
     const ShL2Rgb b = interpolateProbes(plain, locateProbe(plain, p));
     EXPECT_EQ(std::memcmp(&a, &b, sizeof(ShL2Rgb)), 0) << i;
-    const ShL2Rgb c = interpolateProbes(s, locateProbe(s, p));
+    // The layer applies to visibility-weighted blends only (these sets have no maps, so the
+    // flag stands in for one whose probes all see the point); the plain blend ignores it.
+    ProbeLocation seen = locateProbe(s, p);
+    const ShL2Rgb plainBlend = interpolateProbes(s, seen);
+    EXPECT_EQ(std::memcmp(&a, &plainBlend, sizeof(ShL2Rgb)), 0) << i;
+    seen.visibilityWeighted = true;
+    const ShL2Rgb c = interpolateProbes(s, seen);
     differ += std::memcmp(&a, &c, sizeof(ShL2Rgb)) != 0;
   }
   EXPECT_GT(differ, 10) << "the layer does change the blend where it has a ramp";

@@ -157,9 +157,8 @@ TEST(ProbeSun, BlendMatchesTheCentreBakeBesideTheEdge) {
   for (int x = -3; x <= 3; ++x)
     for (int y = 0; y <= 2; ++y)
       for (int z = -1; z <= 1; ++z) grid.push_back(vec3(0.9f * float(x) + 1.3f, 0.3f + 1.1f * float(y), 1.0f * float(z)));
-  ProbeBakeSettings bake;
+  ProbeBakeSettings bake;  // with visibility maps: the layer applies to the visibility blend
   bake.rays = 1024;
-  bake.visibilityResolution = 0;
   ProbeBakeReport report;
   Result<ProbeSet> set = bakeProbes(w.scene, *w.tracer, grid, bake, nullptr, nullptr, &report);
   ASSERT_TRUE(bool(set)) << set.error();
