@@ -1075,6 +1075,17 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
     s.visibility.moments[t + 1] = uint16_t(mu / 20);
     s.visibility.moments[t + 2] = uint16_t(std::min(65535, mu + mu / 4));
   }
+  // A sun layer, so that the single lookups' kiln_probes_sample_sh must carry the location's
+  // barycentric coordinates and visibility flag from C to apply it as the batch does.
+  s.sun.light = 0;
+  s.sun.sh.addSample(glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f)), glm::vec3(3.0f), 1.0f);
+  std::uniform_real_distribution<float> share(0.0f, 1.0f), rampValue(-2.0f, 3.0f);
+  for (int32_t i = 0; i < s.probeCount(); ++i) s.sun.visibility.push_back(share(rng));
+  for (int32_t c = 0; c < s.innerCellCount; ++c)
+    s.sun.ramps.push_back(c % 2 ? glm::vec4(std::numeric_limits<float>::quiet_NaN())
+                                : glm::vec4(rampValue(rng), rampValue(rng), rampValue(rng),
+                                            rampValue(rng)));
+  ASSERT_TRUE(validateProbeSet(s, "c_batch").ok()) << validateProbeSet(s, "c_batch").error();
   const std::string path = tempPath("c_batch.kprobe");
   ASSERT_TRUE(writeProbeFile(s, path).ok());
   kiln_probes* probes = nullptr;
@@ -1095,7 +1106,7 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
   }
   kiln_probe_blend blend;
   ASSERT_EQ(kiln_probe_blend_defaults(&blend), KILN_OK);
-  int hidden = 0;
+  int hidden = 0, weighted = 0, layered = 0;
   for (bool withHints : {false, true}) {
     std::vector<int32_t> h = hints;
     std::vector<kiln_probe_location> batch(n);
@@ -1125,9 +1136,19 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
         hidden += loc.weights[k] != loc.barycentric[k];
       }
       for (int k = 0; k < 27; ++k) ASSERT_EQ(sh[27 * i + size_t(k)], ref[k]) << i;
+      ASSERT_EQ(batch[i].visibility_weighted, loc.visibility_weighted) << i;
+      weighted += loc.visibility_weighted != 0;
+      // The same location with the flag cleared: the plain blend's SH, no layer.
+      kiln_probe_location plain = loc;
+      plain.visibility_weighted = 0;
+      float noLayer[27];
+      ASSERT_EQ(kiln_probes_sample_sh(probes, &plain, noLayer), KILN_OK);
+      layered += std::memcmp(noLayer, ref, sizeof(ref)) != 0;
     }
   }
   EXPECT_GT(hidden, int(n) / 4) << "the visibility weighting changes weights";
+  EXPECT_GT(weighted, int(n)) << "inside the hull every location is visibility-weighted";
+  EXPECT_GT(layered, int(n) / 4) << "the sun layer changes the blend in cells with a ramp";
   kiln_probes_release(probes);
 }
 

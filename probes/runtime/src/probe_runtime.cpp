@@ -1187,7 +1187,8 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
           hi = std::max(hi, v);
         }
       }
-      const float d = lo <= hi ? std::clamp(ramp, lo, hi) - mixed : 0.0f;
+      // (A location from the C API is untrusted: a non-finite ramp value changes nothing.)
+      const float d = lo <= hi && std::isfinite(ramp) ? std::clamp(ramp, lo, hi) - mixed : 0.0f;
       for (int i = 0; i < kShL2Count; ++i) r.c[i] += d * s.sun.sh.c[i];
     }
   }
