@@ -19,6 +19,7 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "probes/sun_shadows.h"
 #include "src/distributed.h"
 #include "src/parallel.h"
 #include "src/sampling.h"
@@ -32,6 +33,7 @@ namespace {
 constexpr uint64_t kLightsTag = 0x6c6967687473ull;       // "lights"
 constexpr uint64_t kOcclusionTag = 0x6f63636c75646eull;  // "occludn"
 constexpr uint64_t kFootprintTag = 0x666f6f74707274ull;  // "footprt"
+constexpr uint64_t kSunRampsTag = 0x73756e72616d70ull;   // "sunramp"
 // A footprint origin stops this fraction of the radius short of the surface between it and
 // the probe.
 constexpr float kFootprintGap = 0.01f;
@@ -62,19 +64,30 @@ std::optional<ShL2Rgb> validNeighbourMean(const ProbeSet& set,
   return mean;
 }
 
+// Mean of value(j) (a T) over the valid probes j that share a cell with probe `i`; nullopt
+// when there is none.
+template <class T, class Value>
+std::optional<T> validNeighbourMeanOf(const std::vector<std::vector<int32_t>>& adjacency,
+                                      const std::vector<char>& valid, int32_t i, Value value) {
+  T sum(0.0);
+  int n = 0;
+  for (int32_t j : adjacency[i]) {
+    if (!valid[j]) continue;
+    sum += value(j);
+    ++n;
+  }
+  if (n == 0) return std::nullopt;
+  return sum / double(n);
+}
+
 // Mean occlusion of the valid probes that share a cell with probe `i`; nullopt when none.
 std::optional<glm::vec4> validNeighbourOcclusion(const ProbeSet& set,
                                                  const std::vector<std::vector<int32_t>>& adjacency,
                                                  const std::vector<char>& valid, int32_t i) {
-  glm::dvec4 sum(0.0);
-  int n = 0;
-  for (int32_t j : adjacency[i]) {
-    if (!valid[j]) continue;
-    sum += glm::dvec4(set.occlusion[j]);
-    ++n;
-  }
-  if (n == 0) return std::nullopt;
-  return glm::vec4(sum / double(n));
+  const auto mean = validNeighbourMeanOf<glm::dvec4>(
+      adjacency, valid, i, [&](int32_t j) { return glm::dvec4(set.occlusion[size_t(j)]); });
+  if (!mean) return std::nullopt;
+  return glm::vec4(*mean);
 }
 
 // Probes sharing a cell, per probe (sorted, unique).
@@ -313,12 +326,18 @@ ProbeSample bakeProbe(const Integrator& integrator, vec3 p, uint64_t key, uint32
     if (cancel && (j & 4095u) == 4095u && cancel->load(std::memory_order_relaxed)) break;
     integrator.punctualLights(footprint ? origins[j] : p, lightKey, j, deltas);
   }
+  const int32_t sun = sunLayerLight(scene, integrator.settings());
+  const float sunIrradiance = sun >= 0 ? luminance(scene.lights[size_t(sun)].irradianceAt(p)) : 0.0f;
+  double sunShare = 0.0;
   for (const DeltaLight& d : deltas) {
     if (!isFinite(d.irradiance)) continue;
     sum.add(d.direction, d.irradiance, 1.0 / double(evaluations));
+    if (int32_t(d.light) == sun && sunIrradiance > 0.0f)
+      sunShare += double(luminance(d.irradiance) / sunIrradiance) / double(evaluations);
   }
 
   ProbeSample out;
+  out.sunShare = float(std::clamp(sunShare, 0.0, 1.0));
   out.sh = sum.result();
   out.validity = 1.0f - float(backFaces) / float(rays);
   if (withVisibility) out.visibility = map.finish(tracer, p);
@@ -378,6 +397,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     float validity = 1.0f;
     uint64_t rays = 0;
     bool footprint = false;  // baked over a ball
+    float sunShare = 0.0f;
   };
   std::vector<ProbeOut> outs(count);
   const std::vector<float> maxDistance = probeVisibilityMaxDistances(scene, positions, settings);
@@ -417,6 +437,7 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
           outs[i].sh = sample.sh;
           outs[i].validity = sample.validity;
           outs[i].footprint = radius > 0.0f;
+          outs[i].sunShare = sample.sunShare;
           std::copy(sample.visibility.begin(), sample.visibility.end(),
                     moments.begin() + ptrdiff_t(i * perProbe));
           if (anyChannel) {
@@ -438,9 +459,21 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
     rep.footprintProbes += o.footprint ? 1 : 0;
   }
 
+  const int32_t sun = settings.sunShadows ? sunLayerLight(scene, integrator.settings()) : -1;
+  ShL2Rgb sunDelta;
+  if (sun >= 0) {
+    set.sun.light = sun;
+    const Light& light = scene.lights[size_t(sun)];
+    // The light's raw delta, c_i = E Y_i(s): what a probe's SH holds of the light before
+    // deringing (which the probes keep as before, on the sum; docs/probes.md, "Sun shadows").
+    sunDelta.addSample(-glm::normalize(light.direction), light.color * light.intensity, 1.0f);
+    set.sun.sh = sunDelta;
+    set.sun.visibility.resize(count);
+  }
   for (size_t i = 0; i < count; ++i) {
     set.sh[i] = outs[i].sh;
     set.validity[i] = outs[i].validity;
+    if (sun >= 0) set.sun.visibility[i] = outs[i].sunShare;
   }
   set.occlusion = std::move(occlusion);
   if (settings.visibilityResolution > 0) {
@@ -466,6 +499,13 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
         // Inside geometry every shadow ray is blocked: take the neighbours' occlusion too.
         if (auto o = validNeighbourOcclusion(raw, adjacency, valid, int32_t(i)))
           set.occlusion[i] = *o;
+        // ... and their share of the sun layer's light, which their SH now holds.
+        if (sun >= 0) {
+          if (auto v = validNeighbourMeanOf<double>(adjacency, valid, int32_t(i), [&](int32_t j) {
+                return double(raw.sun.visibility[size_t(j)]);
+              }))
+            set.sun.visibility[i] = float(*v);
+        }
         filled = true;
         ++rep.filledProbes;
       }
@@ -478,6 +518,15 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   }
 
   if (settings.dering) rep.deringedProbes = deringProbeSh(set.sh, settings.threads);
+  if (sun >= 0 && set.dimension == 3) {
+    std::optional<Progress> rampProgress;
+    if (progress) rampProgress.emplace("sun ramps", size_t(set.innerCellCount), "cells");
+    if (!bakeSunRamps(integrator, set, hashValues(settings.seed, kSunRampsTag), settings.threads,
+                      rampProgress ? &*rampProgress : nullptr, cancel))
+      return Error{"cancelled"};
+    if (rampProgress) rampProgress->finish();
+    for (const glm::vec4& a : set.sun.ramps) rep.sunRampCells += std::isnan(a.x) ? 0 : 1;
+  }
   return set;
 }
 

@@ -105,6 +105,10 @@ struct ProbeBakeSettings {
   // which are more accurate where light varies no faster than the probes (near surfaces a
   // ball clipped by the surface is off-centre; docs/probe_placement.md, round 8).
   bool footprintEverywhere = false;
+  // The sun layer (kiln/probe_set.h, ProbeSunLayer; docs/probes.md, "Sun shadows"): sharp
+  // shadow edges of the brightest baked directional light for probe-lit objects, from a ramp
+  // per tetrahedron fitted to shadow rays in it. false = no layer (the plain blend).
+  bool sunShadows = true;
   // Distance (metres) the depths are clamped to; 0 = per probe, the distance to the farthest
   // corner of the static objects' bounds and the probes (visibilityMaxDistances).
   float visibilityMaxDistance = 0.0f;
@@ -118,6 +122,7 @@ struct ProbeBakeReport {
   int32_t filledProbes = 0;            // invalid probes given their neighbours' SH
   int32_t deringedProbes = 0;          // probes whose SH the deringing fit changed
   int32_t footprintProbes = 0;         // probes baked over a footprint (not at their point)
+  int32_t sunRampCells = 0;            // cells whose sun layer has a ramp (ProbeSunLayer)
   uint64_t rays = 0;                   // rays traced by the integrator (all threads)
   IntegratorSettings integrator;       // as resolved from the scene and the settings
   LightModePlan lightModes;            // what each light baked, shadowmask channels
@@ -175,6 +180,10 @@ struct ProbeSample {
   ShL2Rgb sh;
   float validity = 1.0f;
   std::vector<uint16_t> visibility;  // resolution^2 x {mu, sigma, far} unorm16, or empty
+  // The share of the sun layer's light (sunLayerLight) in the SH: its visibility, averaged
+  // as the SH averages it (over the light's samples, or the footprint's origins); 0 when the
+  // integrator bakes no such light.
+  float sunShare = 0.0f;
 };
 // `footprintRadius` > 0 bakes the mean over a ball of that radius around p (see
 // ProbeBakeSettings::footprint): ray s starts at footprintOrigin(tracer, p, radius, key, s)

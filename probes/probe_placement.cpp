@@ -1000,6 +1000,8 @@ std::optional<ProbePlacer::Scored> ProbePlacer::evaluate(const std::vector<uint3
       vis.moments.insert(vis.moments.end(), m.begin(), m.end());
     }
   }
+  // No sun layer (set->sun stays empty): its ramps are fitted per cell of the final set by the
+  // bake, and without them the candidates' SH (which hold the light's share) blend plainly.
   Scored out;
   std::vector<ShL2Rgb> estimates;
   const bool ratioPicks = settings_.objectRatioPicks && objectChecks_ > 0;

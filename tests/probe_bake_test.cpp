@@ -751,7 +751,7 @@ TEST(ProbesCli, BakesTheScenesProbeGroups) {
 }
 
 // Visibility through the CLI on two_rooms with its 36 scene probes (3 x 2 x 3 per room): the
-// bake writes a version 3 file with 32 x 32 maps by default and none with
+// bake writes a version 4 file with 32 x 32 maps by default and none with
 // --visibility-resolution 0. At (4.45, 0.3, 1.5), 0.2 m into the dark room B from the shared
 // wall whose other side room A's sun lights, the point's cell is an outer cell reaching into
 // room A: the plain blend gives it room A's light (1.7 lux with TetGen's cells, 0.043 with
@@ -778,13 +778,15 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
                      "6148 bytes per probe"),
             std::string::npos)
       << log;
+  // The scene's sun is a baked directional light: the bake fills the sun layer.
+  EXPECT_NE(log.find("sun layer: light 'sun', "), std::string::npos) << log;
   ASSERT_EQ(test::runCommand(kiln() + "probes bake " + scene + " --out " + without +
                                  " --rays 4096 --threads 2 --visibility-resolution 0",
                              &log),
             0)
       << log;
   EXPECT_NE(log.find("visibility none"), std::string::npos) << log;
-  // Header: version 3 either way (offset 4); the visibility resolution at offset 60.
+  // Header: version 4 either way (offset 4); the visibility resolution at offset 60.
   const std::string bytesVis = test::readTextFile(withVis),
                     bytesPlain = test::readTextFile(without);
   ASSERT_GE(bytesVis.size(), kProbeFileHeaderSize);
@@ -794,7 +796,7 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
     std::memcpy(&v, b.data() + at, 4);
     return v;
   };
-  EXPECT_EQ(u32(bytesVis, 4), 3u);
+  EXPECT_EQ(u32(bytesVis, 4), 4u);
   EXPECT_EQ(u32(bytesVis, 60), uint32_t(r));
   EXPECT_EQ(u32(bytesPlain, 60), 0u);
   // The maps are the only difference in size: 36 x (4 + 32^2 x 3 x 2) bytes.
@@ -820,6 +822,37 @@ TEST(ProbesCli, VisibilityStopsTheLeakThroughTheSunlitWall) {
     EXPECT_NEAR(x["visibilityMaxDistance"][i].get<double>(), glm::length(reach), 1e-4) << i;
   }
   EXPECT_FALSE(x.contains("visibilityMoments"));  // only with --visibility-moments
+  // The sun layer as the file holds it (version 4): light 0 ("sun"), a share per probe, a ramp
+  // or null per tetrahedron.
+  const Result<ProbeSet> visSet = loadProbeFile(withVis);
+  ASSERT_TRUE(visSet.ok()) << visSet.error();
+  const ProbeSunLayer& sun = visSet->sun;
+  EXPECT_EQ(sun.light, 0);
+  EXPECT_EQ(x["sunLight"].get<int>(), sun.light);
+  ASSERT_EQ(x["sunVisibility"].size(), 36u);
+  for (size_t i = 0; i < 36; ++i)
+    EXPECT_EQ(x["sunVisibility"][i].get<float>(), sun.visibility[i]) << i;
+  EXPECT_EQ(x["sunRampCount"].get<size_t>(), sun.ramps.size());
+  ASSERT_EQ(x["sunRamps"].size(), sun.ramps.size());
+  int fitted = 0;
+  for (size_t c = 0; c < sun.ramps.size(); ++c) {
+    const Json& a = x["sunRamps"][c];
+    if (std::isnan(sun.ramps[c].x)) {
+      EXPECT_TRUE(a.is_null()) << c;
+    } else {
+      ++fitted;
+      ASSERT_EQ(a.size(), 4u) << c;
+      for (int k = 0; k < 4; ++k) EXPECT_EQ(a[k].get<float>(), sun.ramps[c][k]) << c;
+    }
+  }
+  EXPECT_EQ(x["sunRampsFitted"].get<int>(), fitted);
+  // Unity's SH9 constants cannot hold the layer: --unity exports the probes' SH alone.
+  ASSERT_EQ(test::runCommand(kiln() + "probes export " + withVis + " --unity --out " + dir +
+                                 "/u.json",
+                             &log),
+            0)
+      << log;
+  EXPECT_EQ(Json::parse(test::readTextFile(dir + "/u.json"))["sh9"].size(), 36u);
   ASSERT_EQ(test::runCommand(kiln() + "probes export " + withVis + " --visibility-moments --out " +
                                  dir + "/m.json",
                              &log),

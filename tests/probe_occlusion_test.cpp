@@ -478,7 +478,7 @@ TEST(ProbeOcclusionCli, LightingModeAndOcclusionOutput) {
       << log;
   ASSERT_EQ(test::runCommand(kiln + "export " + dir + "/a.kprobe", &log), 0) << log;
   Json x = Json::parse(log);
-  EXPECT_EQ(x["version"], 3);
+  EXPECT_EQ(x["version"], kProbeFileVersion);
   EXPECT_EQ(x["occlusion"].size(), 4u);
   EXPECT_EQ(x["occlusionLights"], Json::array({0, -1, -1, -1}));
 

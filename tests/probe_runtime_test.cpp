@@ -1,12 +1,15 @@
 // probe_runtime_test.cpp: the probe lookup (Cupisz 2012): robust orientation, barycentric
 // weights, hinted walks, outer-cell extrapolation, batch and threads, and the .kprobe file
-// (round trip, and rejection of every kind of bad file without crashing).
+// (round trip, and rejection of every kind of bad file without crashing), and the file's sun
+// layer block (version 4).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <bit>
+#include <limits>
 #include <map>
 #include <random>
 #include <thread>
@@ -624,7 +627,7 @@ TEST(ProbeFile, HeaderDamageIsNamed) {
   std::vector<uint8_t> b = good;
   b[0] = 'X';
   EXPECT_NE(parseError(b).find("magic"), std::string::npos);
-  EXPECT_NE(patched(4, 4).find("version: file version 4"), std::string::npos);
+  EXPECT_NE(patched(4, 5).find("version: file version 5"), std::string::npos);
   EXPECT_NE(patched(8, 7).find("dimension"), std::string::npos);
   // Huge counts in a small file: rejected from the header, before any allocation.
   EXPECT_NE(patched(12, 1u << 25).find("size: file has"), std::string::npos);
@@ -764,6 +767,296 @@ TEST(ProbeFile, RandomCorruptionNeverCrashes) {
   EXPECT_FALSE(loadProbeFile(tempPath("does_not_exist.kprobe")).ok());
 }
 
+// ---- .kprobe version 4: the sun layer ------------------------------------------------------
+
+// A NaN with a payload: the file keeps the bits of a "no ramp" as they were written.
+float payloadNan() { return std::bit_cast<float>(0x7fc01234u); }
+
+// smallSet() with a sun layer: light 2 (any index >= 0; the runtime does not know the scene's
+// count), a lobe, a share per probe across [0, 1], and both kinds of ramp.
+ProbeSet smallSetWithSun() {
+  ProbeSet s = smallSet();
+  s.sun.light = 2;
+  s.sun.sh.addSample(glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f)), glm::vec3(3.0f, 2.5f, 2.0f),
+                     1.0f);
+  s.sun.visibility = {0.0f, 0.25f, 1.0f, 0.6f, 0.125f};
+  EXPECT_EQ(s.sun.visibility.size(), size_t(s.probeCount()));
+  s.sun.ramps.assign(size_t(s.innerCellCount), glm::vec4(payloadNan()));
+  s.sun.ramps[0] = glm::vec4(-0.25f, 1.5f, 0.5f, 0.75f);
+  return s;
+}
+
+// Recomputes a .kprobe image's checksum after its bytes were patched, so that the reader
+// judges the patched field and not the checksum.
+void reseal(std::vector<uint8_t>& b) {
+  const uint64_t sum = binaryFileChecksum(b, kProbeFileChecksumOffset, kProbeFileHeaderSize);
+  std::memcpy(b.data() + kProbeFileChecksumOffset, &sum, 8);
+}
+
+bool allFinite(const ShL2Rgb& sh) {
+  for (const glm::vec3& c : sh.c)
+    if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z)) return false;
+  return true;
+}
+
+template <typename T>
+bool sameBits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), sizeof(T) * a.size()) == 0);
+}
+
+TEST(ProbeSunFile, Version4RoundTripIsBitExact) {
+  const ProbeSet s = smallSetWithSun();
+  ASSERT_TRUE(validateProbeSet(s, "sun").ok()) << validateProbeSet(s, "sun").error();
+  ProbeSet plain = s;
+  plain.sun = ProbeSunLayer{};
+  const std::vector<uint8_t> bytes = serializeProbeSet(s);
+  uint32_t version = 0;
+  std::memcpy(&version, bytes.data() + 4, 4);
+  EXPECT_EQ(version, 4u);
+  // The block after the version 3 payload: sunLight, the lobe, a share per probe, the ramp
+  // count and the ramps; without a layer, sunLight -1 alone.
+  const size_t v3 = serializeProbeSet(s, 3).size();
+  const size_t np = size_t(s.probeCount()), inner = size_t(s.innerCellCount);
+  EXPECT_EQ(bytes.size(), v3 + 4 + 108 + 4 * np + 4 + 16 * inner);
+  EXPECT_EQ(serializeProbeSet(plain).size(), v3 + 4);
+  int32_t light = 0;
+  std::memcpy(&light, bytes.data() + v3, 4);
+  EXPECT_EQ(light, 2);
+  const std::string path = tempPath("sun.kprobe");
+  ASSERT_TRUE(writeProbeFile(s, path).ok());
+  for (const Result<ProbeSet>& r : {parseProbeSet(bytes, "v4"), loadProbeFile(path)}) {
+    ASSERT_TRUE(r.ok()) << r.error();
+    EXPECT_EQ(r->sun.light, 2);
+    EXPECT_EQ(std::memcmp(&r->sun.sh, &s.sun.sh, sizeof(ShL2Rgb)), 0);
+    EXPECT_TRUE(sameBits(r->sun.visibility, s.sun.visibility));
+    EXPECT_TRUE(sameBits(r->sun.ramps, s.sun.ramps));  // the NaN payloads too
+    EXPECT_EQ(std::bit_cast<uint32_t>(r->sun.ramps[1].z), 0x7fc01234u);
+    EXPECT_EQ(serializeProbeSet(*r), bytes);
+    // The loaded layer blends as the original does, bit for bit, inside and outside the hull.
+    std::mt19937 rng(31);
+    std::uniform_real_distribution<float> u(-0.5f, 1.5f);
+    for (int i = 0; i < 200; ++i) {
+      const glm::vec3 p(u(rng), u(rng), u(rng));
+      const ShL2Rgb a = interpolateProbes(s, locateProbe(s, p));
+      const ShL2Rgb b = interpolateProbes(*r, locateProbe(*r, p));
+      EXPECT_EQ(std::memcmp(&a, &b, sizeof(ShL2Rgb)), 0) << i;
+    }
+  }
+  std::filesystem::remove(path);
+  // A layer without ramps (dimension 3 too: the bake may fit none) round-trips likewise.
+  ProbeSet noRamps = s;
+  noRamps.sun.ramps.clear();
+  const std::vector<uint8_t> b2 = serializeProbeSet(noRamps);
+  EXPECT_EQ(b2.size(), v3 + 4 + 108 + 4 * np + 4);
+  const Result<ProbeSet> r2 = parseProbeSet(b2, "v4");
+  ASSERT_TRUE(r2.ok()) << r2.error();
+  EXPECT_EQ(r2->sun.light, 2);
+  EXPECT_TRUE(sameBits(r2->sun.visibility, s.sun.visibility));
+  EXPECT_TRUE(r2->sun.ramps.empty());
+}
+
+// Written as version 3 (what older readers take), the layer is left out, as version 2 leaves
+// out the visibility; the new reader gives such a file no layer and the plain blend.
+TEST(ProbeSunFile, Version3FileHasNoSunLayer) {
+  const ProbeSet s = smallSetWithSun();
+  ProbeSet plain = s;
+  plain.sun = ProbeSunLayer{};
+  const std::vector<uint8_t> v3 = serializeProbeSet(s, 3);
+  uint32_t version = 0;
+  std::memcpy(&version, v3.data() + 4, 4);
+  EXPECT_EQ(version, 3u);
+  EXPECT_EQ(v3, serializeProbeSet(plain, 3));
+  EXPECT_EQ(v3.size() + 4, serializeProbeSet(plain).size());
+  const Result<ProbeSet> r = parseProbeSet(v3, "v3");
+  ASSERT_TRUE(r.ok()) << r.error();
+  EXPECT_TRUE(r->sun.empty());
+  EXPECT_EQ(r->sun.light, -1);
+  EXPECT_TRUE(r->sun.visibility.empty() && r->sun.ramps.empty());
+  EXPECT_EQ(serializeProbeSet(*r, 3), v3);
+  EXPECT_EQ(serializeProbeSet(*r), serializeProbeSet(plain));
+  int differ = 0;
+  std::mt19937 rng(32);
+  std::uniform_real_distribution<float> u(0.0f, 0.9f);
+  for (int i = 0; i < 200; ++i) {
+    const glm::vec3 p(u(rng), u(rng), u(rng));
+    const ShL2Rgb a = interpolateProbes(*r, locateProbe(*r, p));
+    const ShL2Rgb b = interpolateProbes(plain, locateProbe(plain, p));
+    EXPECT_EQ(std::memcmp(&a, &b, sizeof(ShL2Rgb)), 0) << i;
+    // The layer applies to visibility-weighted blends only (these sets have no maps, so the
+    // flag stands in for one whose probes all see the point); the plain blend ignores it.
+    ProbeLocation seen = locateProbe(s, p);
+    const ShL2Rgb plainBlend = interpolateProbes(s, seen);
+    EXPECT_EQ(std::memcmp(&a, &plainBlend, sizeof(ShL2Rgb)), 0) << i;
+    seen.visibilityWeighted = true;
+    const ShL2Rgb c = interpolateProbes(s, seen);
+    differ += std::memcmp(&a, &c, sizeof(ShL2Rgb)) != 0;
+  }
+  EXPECT_GT(differ, 10) << "the layer does change the blend where it has a ramp";
+}
+
+// Each of validateProbeSet's rules for the layer, in memory and (where the format can carry
+// the fault) through a file whose checksum is valid: rejected, and the message names the field.
+TEST(ProbeSunFile, EveryLayerRuleIsCheckedAndNamed) {
+  const ProbeSet good = smallSetWithSun();
+  auto check = [&](auto change, const std::string& field, bool viaFile = true) {
+    ProbeSet s = good;
+    change(s);
+    const Status st = validateProbeSet(s, "mem");
+    EXPECT_FALSE(st.ok()) << field;
+    if (!st.ok()) {
+      EXPECT_EQ(st.error().rfind("mem: " + field, 0), 0u) << st.error();
+    }
+    if (viaFile) {
+      const std::string e = parseError(serializeProbeSet(s));
+      EXPECT_EQ(e.rfind("bad.kprobe: ", 0), 0u) << e;
+      EXPECT_NE(e.find(field), std::string::npos) << field << ": " << e;
+    }
+  };
+  for (float bad : {-0.01f, 1.01f, std::nanf(""), std::numeric_limits<float>::infinity()}) {
+    check([&](ProbeSet& s) { s.sun.visibility[3] = bad; }, "sun.visibility[3]: not in [0, 1]");
+  }
+  check([](ProbeSet& s) { s.sun.visibility[0] = -0.0f, s.sun.visibility[4] = 2.0f; },
+        "sun.visibility[4]: not in [0, 1]");
+  // Sizes (a file cannot hold these: its counts fix them; the reader names the size).
+  check([](ProbeSet& s) { s.sun.visibility.pop_back(); },
+        "sun.visibility: size differs from positions", false);
+  check([](ProbeSet& s) { s.sun.ramps.push_back(glm::vec4(0.5f)); },
+        "sun.ramps: size differs from innerCellCount", false);
+  check([](ProbeSet& s) { s.sun.ramps.pop_back(); }, "sun.ramps: size differs from innerCellCount",
+        false);
+  check([](ProbeSet& s) { s.sun.sh.c[4].g = std::nanf(""); }, "sun.sh[4]: not finite");
+  check([](ProbeSet& s) { s.sun.sh.c[0].r = -std::numeric_limits<float>::infinity(); },
+        "sun.sh[0]: not finite");
+  // Ramps: four finite values, or x NaN and the rest NaN too; an infinity is neither.
+  check([](ProbeSet& s) { s.sun.ramps[1].y = 0.5f; }, "sun.ramps[1]: x is NaN (no ramp)");
+  check([](ProbeSet& s) { s.sun.ramps[1].w = 0.0f; }, "sun.ramps[1]: x is NaN (no ramp)");
+  check([](ProbeSet& s) { s.sun.ramps[0].w = std::nanf(""); }, "sun.ramps[0]: not finite");
+  check([](ProbeSet& s) { s.sun.ramps[0].x = std::numeric_limits<float>::infinity(); },
+        "sun.ramps[0]: not finite");
+  check([](ProbeSet& s) { s.sun.ramps[1] = glm::vec4(std::numeric_limits<float>::infinity()); },
+        "sun.ramps[1]: not finite");
+  // No layer: no data. (The writer writes only sunLight then, so this is in memory alone.)
+  check([](ProbeSet& s) { s.sun.light = -1, s.sun.ramps.clear(); },
+        "sun.visibility: data without a light", false);
+  check([](ProbeSet& s) { s.sun.light = -1, s.sun.visibility.clear(); },
+        "sun.ramps: data without a light", false);
+  check([](ProbeSet& s) { s.sun.light = -2; }, "sun.light: -2 is not a light or -1", false);
+  EXPECT_NE(parseError(serializeProbeSet([&] {
+              ProbeSet s = good;
+              s.sun.light = -2;
+              return s;
+            }())).find("sunLight: -2 is not a light or -1"),
+            std::string::npos);
+  // Ramps are for tetrahedra: a planar set (dimension 2) may have a layer but no ramps.
+  ProbeSet flat = build(std::vector<glm::vec3>{glm::vec3(0, 0, 0), glm::vec3(1, 0, 0),
+                                               glm::vec3(0, 0, 1), glm::vec3(1, 0, 1.2f)},
+                        DelaunayBackend::TetGen);
+  ASSERT_EQ(flat.dimension, 2);
+  flat.sun.light = 0;
+  flat.sun.visibility.assign(size_t(flat.probeCount()), 0.5f);
+  EXPECT_TRUE(validateProbeSet(flat, "flat").ok());
+  EXPECT_TRUE(parseProbeSet(serializeProbeSet(flat), "flat").ok());
+  flat.sun.ramps.assign(size_t(flat.innerCellCount), glm::vec4(0.5f));
+  EXPECT_NE(validateProbeSet(flat, "flat").error().find("sun.ramps: ramps in dimension 2"),
+            std::string::npos);
+  EXPECT_NE(parseError(serializeProbeSet(flat)).find("sunRampCount: " +
+                                                    std::to_string(flat.innerCellCount) +
+                                                    " ramps in dimension 2"),
+            std::string::npos)
+      << parseError(serializeProbeSet(flat));
+  // What is allowed: any light index >= 0, shares at 0 and 1 exactly, no ramps, all NaN ramps.
+  ProbeSet ok = good;
+  ok.sun.light = 1 << 30;
+  ok.sun.visibility = {0.0f, 1.0f, 0.0f, 1.0f, -0.0f};
+  EXPECT_TRUE(parseProbeSet(serializeProbeSet(ok), "ok").ok());
+  ok.sun.ramps.assign(ok.sun.ramps.size(), glm::vec4(std::nanf("")));
+  EXPECT_TRUE(parseProbeSet(serializeProbeSet(ok), "ok").ok());
+}
+
+// Truncated and hostile sun blocks: every cut is named as truncated; a sunLight or rampCount
+// that asks for more than the file holds gets a message naming it, decided from the counts
+// against the file's size before anything is read (the header's counts bound the file: the
+// reader never allocates beyond it); bit flips in the block never crash, and what is accepted
+// blends to finite values.
+TEST(ProbeSunFile, TruncatedAndHostileSunBlocksAreNamed) {
+  const ProbeSet s = smallSetWithSun();
+  const std::vector<uint8_t> good = serializeProbeSet(s);
+  const size_t block = serializeProbeSet(s, 3).size();  // offset of sunLight
+  const size_t rampCountAt = block + 4 + 108 + 4 * size_t(s.probeCount());
+  for (size_t n = block - 8; n < good.size(); ++n) {
+    const std::vector<uint8_t> cut(good.begin(), good.begin() + long(n));
+    const std::string e = parseError(cut);
+    ASSERT_EQ(e.rfind("bad.kprobe: size: file has " + std::to_string(n), 0), 0u) << n << ": " << e;
+    EXPECT_NE(e.find("truncated"), std::string::npos) << n << ": " << e;
+  }
+  auto patched = [&](size_t at, uint32_t value, std::vector<uint8_t> b) {
+    std::memcpy(b.data() + at, &value, 4);
+    reseal(b);
+    return b;
+  };
+  // rampCount neither 0 nor innerCellCount, up to 2^32 - 1.
+  for (uint32_t count : {1u, uint32_t(s.innerCellCount) + 1, 1u << 28, 0xFFFFFFFFu}) {
+    const std::string e = parseError(patched(rampCountAt, count, good));
+    EXPECT_NE(e.find("sunRampCount: " + std::to_string(count) + " is neither 0 nor "
+                     "innerCellCount (" + std::to_string(s.innerCellCount) + ")"),
+              std::string::npos)
+        << e;
+  }
+  // rampCount 0 with the ramps still there: trailing data.
+  EXPECT_NE(parseError(patched(rampCountAt, 0, good)).find("trailing data"), std::string::npos);
+  // A light on a file that ends after sunLight -1, up to INT32_MAX: truncated, not read.
+  ProbeSet plain = s;
+  plain.sun = ProbeSunLayer{};
+  for (uint32_t light : {0u, 7u, 0x7FFFFFFFu}) {
+    const std::string e = parseError(patched(block, light, serializeProbeSet(plain)));
+    EXPECT_NE(e.find("sunLight " + std::to_string(light) + " needs at least"), std::string::npos)
+        << e;
+    EXPECT_NE(e.find("truncated"), std::string::npos) << e;
+  }
+  EXPECT_NE(parseError(patched(block, 0x80000000u, good)).find("sunLight: -2147483648"),
+            std::string::npos);
+  // sunLight -1 on a full layer: trailing data.
+  EXPECT_NE(parseError(patched(block, 0xFFFFFFFFu, good)).find("trailing data"),
+            std::string::npos);
+  // Huge counts in the header of a version 4 file are refused from the header (the file's
+  // size cannot match them), through the file reader too, and so is a file longer than the
+  // largest sun block its counts allow.
+  const std::vector<uint8_t> hugeProbes = patched(12, 1u << 25, good);
+  EXPECT_NE(parseError(hugeProbes).find("size: file has"), std::string::npos);
+  std::vector<uint8_t> longer = good;
+  longer.resize(good.size() + 64, 0);
+  EXPECT_NE(parseError(longer).find("trailing data"), std::string::npos) << parseError(longer);
+  const std::string path = tempPath("hostile_sun.kprobe");
+  for (const std::vector<uint8_t>& b :
+       {hugeProbes, longer, patched(rampCountAt, 0xFFFFFFFFu, good)}) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    std::fwrite(b.data(), 1, b.size(), f);
+    std::fclose(f);
+    const Result<ProbeSet> r = loadProbeFile(path);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().rfind(path + ": ", 0), 0u) << r.error();
+  }
+  std::filesystem::remove(path);
+  // Bit flips in the block with the checksum resealed: caught, or harmless to the blend.
+  std::mt19937 rng(33);
+  int accepted = 0;
+  for (int i = 0; i < 3000; ++i) {
+    std::vector<uint8_t> b = good;
+    const int flips = 1 + int(rng() % 3);
+    for (int f = 0; f < flips; ++f) b[block + rng() % (good.size() - block)] ^= uint8_t(1u << (rng() % 8));
+    reseal(b);
+    const Result<ProbeSet> r = parseProbeSet(b, "fuzz");
+    if (!r.ok()) continue;
+    ++accepted;
+    for (const glm::vec3 p : {glm::vec3(0.2f, 0.2f, 0.2f), glm::vec3(0.6f, 0.5f, 0.55f),
+                              glm::vec3(3.0f, -1.0f, 0.5f)}) {
+      const ShL2Rgb sh = interpolateProbes(*r, locateProbe(*r, p));
+      ASSERT_TRUE(allFinite(sh)) << i;
+    }
+  }
+  EXPECT_GT(accepted, 100);  // flips in the values that stay valid
+}
+
 }  // namespace
 // The C batch (kiln_probes_sample_batch_blend) takes its cells from the interleaved C++
 // batch a chunk at a time and weights each point with its own normal: against single C
@@ -782,6 +1075,17 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
     s.visibility.moments[t + 1] = uint16_t(mu / 20);
     s.visibility.moments[t + 2] = uint16_t(std::min(65535, mu + mu / 4));
   }
+  // A sun layer, so that the single lookups' kiln_probes_sample_sh must carry the location's
+  // barycentric coordinates and visibility flag from C to apply it as the batch does.
+  s.sun.light = 0;
+  s.sun.sh.addSample(glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f)), glm::vec3(3.0f), 1.0f);
+  std::uniform_real_distribution<float> share(0.0f, 1.0f), rampValue(-2.0f, 3.0f);
+  for (int32_t i = 0; i < s.probeCount(); ++i) s.sun.visibility.push_back(share(rng));
+  for (int32_t c = 0; c < s.innerCellCount; ++c)
+    s.sun.ramps.push_back(c % 2 ? glm::vec4(std::numeric_limits<float>::quiet_NaN())
+                                : glm::vec4(rampValue(rng), rampValue(rng), rampValue(rng),
+                                            rampValue(rng)));
+  ASSERT_TRUE(validateProbeSet(s, "c_batch").ok()) << validateProbeSet(s, "c_batch").error();
   const std::string path = tempPath("c_batch.kprobe");
   ASSERT_TRUE(writeProbeFile(s, path).ok());
   kiln_probes* probes = nullptr;
@@ -802,7 +1106,7 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
   }
   kiln_probe_blend blend;
   ASSERT_EQ(kiln_probe_blend_defaults(&blend), KILN_OK);
-  int hidden = 0;
+  int hidden = 0, weighted = 0, layered = 0;
   for (bool withHints : {false, true}) {
     std::vector<int32_t> h = hints;
     std::vector<kiln_probe_location> batch(n);
@@ -832,9 +1136,19 @@ TEST(ProbeCApi, BatchWithNormalsGivesTheSingleLookupsResults) {
         hidden += loc.weights[k] != loc.barycentric[k];
       }
       for (int k = 0; k < 27; ++k) ASSERT_EQ(sh[27 * i + size_t(k)], ref[k]) << i;
+      ASSERT_EQ(batch[i].visibility_weighted, loc.visibility_weighted) << i;
+      weighted += loc.visibility_weighted != 0;
+      // The same location with the flag cleared: the plain blend's SH, no layer.
+      kiln_probe_location plain = loc;
+      plain.visibility_weighted = 0;
+      float noLayer[27];
+      ASSERT_EQ(kiln_probes_sample_sh(probes, &plain, noLayer), KILN_OK);
+      layered += std::memcmp(noLayer, ref, sizeof(ref)) != 0;
     }
   }
   EXPECT_GT(hidden, int(n) / 4) << "the visibility weighting changes weights";
+  EXPECT_GT(weighted, int(n)) << "inside the hull every location is visibility-weighted";
+  EXPECT_GT(layered, int(n) / 4) << "the sun layer changes the blend in cells with a ramp";
   kiln_probes_release(probes);
 }
 

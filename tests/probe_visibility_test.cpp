@@ -1141,7 +1141,7 @@ uint32_t wordAt(const std::vector<uint8_t>& b, size_t at) {
 
 TEST(ProbeVisibilityFile, Version3RoundTripsExactly) {
   const ProbeSet s = setWithVariedMaps();
-  const std::vector<uint8_t> bytes = serializeProbeSet(s);
+  const std::vector<uint8_t> bytes = serializeProbeSet(s, 3);
   EXPECT_EQ(wordAt(bytes, 4), 3u);
   EXPECT_EQ(wordAt(bytes, 60), uint32_t(kResolution));
   // The block's size: a maxDistance and R^2 x {mu, sigma, far} u16 per probe, after the
@@ -1160,7 +1160,11 @@ TEST(ProbeVisibilityFile, Version3RoundTripsExactly) {
   EXPECT_EQ(r->visibility.resolution, s.visibility.resolution);
   EXPECT_EQ(r->visibility.maxDistance, s.visibility.maxDistance);
   EXPECT_EQ(r->visibility.moments, s.visibility.moments);
-  EXPECT_EQ(serializeProbeSet(*r), bytes);
+  EXPECT_EQ(serializeProbeSet(*r, 3), bytes);
+  // Version 4 adds the sun block (sunLight -1 alone here) after the same bytes.
+  const std::vector<uint8_t> v4 = serializeProbeSet(s);
+  ASSERT_EQ(v4.size(), bytes.size() + 4);
+  EXPECT_TRUE(std::equal(bytes.begin() + 72, bytes.end(), v4.begin() + 72));
   for (const glm::vec3 p : pointsInCube(200, 17)) {
     const ProbeLocation a = locateProbe(s, p), b = locateProbe(*r, p);
     EXPECT_EQ(a.cell, b.cell);

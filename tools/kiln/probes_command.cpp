@@ -70,6 +70,7 @@ struct BakeOptions {
   float footprint = ProbeBakeSettings{}.footprint;          // 0 = a point bake
   float footprintMaxRadius = ProbeBakeSettings{}.footprintMaxRadius;
   bool footprintEverywhere = ProbeBakeSettings{}.footprintEverywhere;
+  bool noSunShadows = false;
   bool quiet = false;
   bool mpi = false;
   SkyOptions sky;
@@ -128,6 +129,7 @@ int runBake(const BakeOptions& options) {
   settings.footprint = o.footprint;
   settings.footprintMaxRadius = o.footprintMaxRadius;
   settings.footprintEverywhere = o.footprintEverywhere;
+  settings.sunShadows = !o.noSunShadows;
   if (!o.lightingMode.empty()) {
     Result<LightingMode> mode = parseLightingMode(o.lightingMode);
     if (!mode) {
@@ -175,6 +177,14 @@ int runBake(const BakeOptions& options) {
       }
     }
     std::cerr << "\n";
+    if (set->sun.empty()) {
+      std::cerr << "kiln: sun layer none ("
+                << (o.noSunShadows ? "--no-sun-shadows" : "no baked directional light") << ")\n";
+    } else {
+      std::cerr << "kiln: sun layer: light '" << scene.lights[size_t(set->sun.light)].name
+                << "', a shadow ramp in " << report.sunRampCells << " of " << set->innerCellCount
+                << " cells\n";
+    }
     const ProbeVisibility& vis = set->visibility;
     if (vis.empty()) {
       std::cerr << "kiln: visibility none (plain barycentric blending)\n";
@@ -349,6 +359,28 @@ Json exportJson(const ProbeSet& s, bool withMoments) {
   Json cells = Json::array();
   for (const glm::ivec4& c : s.cells) cells.push_back({c[0], c[1], c[2], c[3]});
   j["cells"] = std::move(cells);
+  const ProbeSunLayer& sun = s.sun;
+  j["sunConvention"] =
+      "the sun layer (kiln/probe_set.h ProbeSunLayer): sunLight is the baked directional light "
+      "(scene light index, -1 = no layer) whose direct light sunSh holds at a fully lit point "
+      "(radiance SH as sh); sunVisibility per probe the share of it that reaches the probe, "
+      "in [0, 1]; sunRamps per inner cell the ramp's values at the cell's 4 vertices, or null "
+      "for no ramp (sunRampCount ramps, 0 or innerCellCount; sunRampsFitted not null)";
+  j["sunLight"] = sun.light;
+  if (!sun.empty()) {
+    j["sunSh"] = shJson(sun.sh);
+    Json visibility = Json::array(), ramps = Json::array();
+    for (float v : sun.visibility) visibility.push_back(shortest(v));
+    int32_t fitted = 0;
+    for (const glm::vec4& a : sun.ramps) {
+      fitted += std::isnan(a.x) ? 0 : 1;
+      ramps.push_back(std::isnan(a.x) ? Json(nullptr) : vec4Json(a));
+    }
+    j["sunVisibility"] = std::move(visibility);
+    j["sunRampCount"] = sun.ramps.size();
+    j["sunRampsFitted"] = fitted;
+    j["sunRamps"] = std::move(ramps);
+  }
   return j;
 }
 
@@ -497,6 +529,10 @@ void registerProbesCommand(CLI::App& app) {
                 "Largest footprint radius, metres")
       ->check(finiteNumberValidator(0.0, true, 1e6, "a finite number of metres > 0", "METRES > 0"))
       ->capture_default_str();
+  b->add_flag("--no-sun-shadows", bake->noSunShadows,
+              "No sun layer: objects lit by the probes get the brightest baked directional "
+              "light's shadow edges blended across each tetrahedron instead of sharp (see "
+              "docs/probes.md, \"Sun shadows\")");
   b->add_flag("--footprint-everywhere", bake->footprintEverywhere,
               "Bake every probe over its footprint, not only those in thin sheets of light or "
               "shade (smoother, but less accurate where light varies no faster than the probes)");

@@ -133,6 +133,7 @@ int runLppv(const LppvOptions& o) {
     ProbeBakeSettings bake;
     bake.rays = uint32_t(o.rays);
     bake.threads = o.threads;
+    bake.sunShadows = false;  // the volume keeps each sample's SH, not the probes' cells
     const std::vector<glm::vec3> positions = lppvSamplePositions(volume);
     Progress progress("lppv", positions.size(), "samples", !o.quiet);
     ProbeBakeReport report;

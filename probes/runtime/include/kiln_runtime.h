@@ -9,7 +9,7 @@
  * floats, coefficient-major with RGB innermost: sh[3 * i + channel], i = l(l + 1) + m in the
  * real orthonormal basis, holding RADIANCE. Irradiance is E (not E / pi).
  *
- * Leak-free blending: files baked with per-probe visibility (version 3, the default of
+ * Leak-free blending: files baked with per-probe visibility (version 3 on, the default of
  * `kiln probes bake`) let a lookup weight each probe of the cell by whether it can see the
  * point (a Chebyshev test on the depths its bake rays reached), so light does not pass
  * through a wall between probes on both sides of it. kiln_probes_locate and
@@ -53,12 +53,16 @@ typedef struct kiln_probes kiln_probes;
  * `weights` are the blend's: with visibility, barycentric[k] x probe k's visibility of the
  * point, renormalized; without, equal to `barycentric`. `barycentric` are the cell's own
  * weights of the point (>= 0, sum 1; the same whatever the blend), e.g. to see how much
- * visibility changed. The sample_* calls read `weights` only. */
+ * visibility changed. `visibility_weighted` is nonzero when the weights include the probes'
+ * visibility of the point. The sample_* calls read `weights`; kiln_probes_sample_sh also
+ * reads `cell`, `barycentric` and `visibility_weighted` for the file's sun layer (sharp sun
+ * shadow edges, applied to visibility-weighted blends only; docs/probes.md, "Sun shadows"). */
 typedef struct kiln_probe_location {
   int32_t cell;
   int32_t probes[4];
   float weights[4];
   float barycentric[4];
+  int32_t visibility_weighted;
 } kiln_probe_location;
 
 /* How a lookup blends the probes of the cell around a point. Start from

@@ -55,6 +55,7 @@ void toC(const kiln::ProbeLocation& loc, kiln_probe_location* out) {
     out->weights[k] = loc.weights[k];
     out->barycentric[k] = loc.barycentric[k];
   }
+  out->visibility_weighted = loc.visibilityWeighted ? 1 : 0;
 }
 
 void blendToC(const kiln::ProbeBlendSettings& b, kiln_probe_blend* out) {
@@ -108,7 +109,9 @@ bool fromC(const kiln::ProbeSet& set, const kiln_probe_location* in, kiln::Probe
     if (in->probes[k] < 0 || in->probes[k] >= set.probeCount()) return false;
     loc.probes[k] = in->probes[k];
     loc.weights[k] = in->weights[k];
+    loc.barycentric[k] = in->barycentric[k];
   }
+  loc.visibilityWeighted = in->visibility_weighted != 0;
   return true;
 }
 

@@ -1155,6 +1155,7 @@ void weightByVisibility(const ProbeSet& s, glm::vec3 p, ProbeLocation& loc,
   if (!(sum > 0.0f)) return;
   const float inverse = visibleWeightScale(sum, blend.minVisibleWeight);
   loc.weights = {w0 * inverse, w1 * inverse, w2 * inverse, w3 * inverse};
+  loc.visibilityWeighted = true;
 }
 
 ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept {
@@ -1165,6 +1166,31 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
     if (w == 0.0f) continue;
     const ShL2Rgb& src = s.sh[size_t(loc.probes[k])];
     for (int i = 0; i < kShL2Count; ++i) r.c[i] += w * src.c[i];
+  }
+  // The sun layer (kiln/probe_set.h): the light's share as the cell's ramp gives it at the
+  // point, in place of the weights' mix of the probes' shares.
+  if (loc.visibilityWeighted && !s.sun.empty() && !s.isOuter(loc.cell) &&
+      size_t(loc.cell) < s.sun.ramps.size()) {
+    const glm::vec4 a = s.sun.ramps[size_t(loc.cell)];
+    if (!std::isnan(a.x)) {
+      const float ramp = loc.barycentric[0] * a.x + loc.barycentric[1] * a.y +
+                         loc.barycentric[2] * a.z + loc.barycentric[3] * a.w;
+      // The ramp is geometry-blind: across a wall it would light a closed room. So it only
+      // chooses within the shares of the probes that see the point (visibility weight at
+      // least a tenth of the barycentric one).
+      float mixed = 0.0f, lo = 1.0f, hi = 0.0f;
+      for (int k = 0; k < 4; ++k) {
+        const float v = s.sun.visibility[size_t(loc.probes[k])];
+        mixed += loc.weights[k] * v;
+        if (loc.weights[k] > 0.0f && loc.weights[k] >= 0.1f * loc.barycentric[k]) {
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        }
+      }
+      // (A location from the C API is untrusted: a non-finite ramp value changes nothing.)
+      const float d = lo <= hi && std::isfinite(ramp) ? std::clamp(ramp, lo, hi) - mixed : 0.0f;
+      for (int i = 0; i < kShL2Count; ++i) r.c[i] += d * s.sun.sh.c[i];
+    }
   }
   return r;
 }

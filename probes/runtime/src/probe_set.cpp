@@ -42,6 +42,13 @@ constexpr uint64_t kBytesPerOuterCell = 36 + 64;
 // Version 2's occlusion block: channel lights, then 4 floats per probe.
 constexpr uint64_t kOcclusionLightsBytes = 4 * 4;
 constexpr uint64_t kOcclusionBytesPerProbe = 4 * 4;
+// Version 4's sun block: i32 sunLight, then when it is >= 0 the light's SH, one visibility per
+// probe, u32 rampCount and rampCount ramps of 4 floats.
+constexpr uint64_t kSunLightBytes = 4;
+constexpr uint64_t kSunShBytes = sizeof(ShL2Rgb);
+constexpr uint64_t kSunBytesPerProbe = 4;
+constexpr uint64_t kSunRampCountBytes = 4;
+constexpr uint64_t kSunBytesPerRamp = 16;
 
 Error fail(std::string_view name, const std::string& what) {
   return Error{std::string(name) + ": " + what};
@@ -157,12 +164,78 @@ Result<uint64_t> checkHeader(const uint8_t* h, uint64_t available, std::string_v
     expected += kOcclusionLightsBytes + hd.probeCount * kOcclusionBytesPerProbe;
   }
   expected += hd.probeCount * visibilityBytesPerProbe(vr);
+  if (hd.version < 4) {
+    if (available != expected) {
+      return fail(name, "size: file has " + std::to_string(available) +
+                            " bytes but its header counts need " + std::to_string(expected) +
+                            (available < expected ? " (truncated)" : " (trailing data)"));
+    }
+    return expected;
+  }
+  // Version 4: the sun block's size depends on its own fields (checkSunBlock reads them);
+  // here only the range the header's counts allow, from sunLight -1 alone to a full layer
+  // with one ramp per inner cell, so that no file makes the reader allocate beyond that.
+  const uint64_t least = expected + kSunLightBytes;
+  const uint64_t most = least + kSunShBytes + hd.probeCount * kSunBytesPerProbe +
+                        kSunRampCountBytes + uint64_t(hd.innerCellCount) * kSunBytesPerRamp;
+  if (available < least) {
+    return fail(name, "size: file has " + std::to_string(available) +
+                          " bytes but its header counts need at least " + std::to_string(least) +
+                          " (truncated)");
+  }
+  if (available > most) {
+    return fail(name, "size: file has " + std::to_string(available) +
+                          " bytes but its header counts allow at most " + std::to_string(most) +
+                          " (trailing data)");
+  }
+  return available;
+}
+
+// Offset of the version 4 sun block (sunLight) in a file whose header checkHeader accepted.
+uint64_t sunBlockOffset(const Header& hd) {
+  const uint64_t outer = hd.cellCount - hd.innerCellCount;
+  const uint64_t gridCells = uint64_t(hd.gridSize[0]) * hd.gridSize[1] * hd.gridSize[2];
+  return kProbeFileHeaderSize + hd.probeCount * kBytesPerProbe + hd.cellCount * kBytesPerCell +
+         outer * kBytesPerOuterCell + gridCells * 4 + kOcclusionLightsBytes +
+         hd.probeCount * kOcclusionBytesPerProbe +
+         hd.probeCount * visibilityBytesPerProbe(hd.visibilityResolution);
+}
+
+// Version 4: the sun block's fields that size it (sunLight, rampCount) against the bytes the
+// file has, before the checksum is computed and anything is read. `available` is at least
+// sunBlockOffset + 4 (checkHeader).
+Status checkSunBlock(std::span<const uint8_t> bytes, const Header& hd, std::string_view name) {
+  const uint64_t at = sunBlockOffset(hd), available = bytes.size();
+  const int32_t light = readAt<int32_t>(bytes.data() + at);
+  if (light < -1) {
+    return fail(name, "sunLight: " + std::to_string(light) + " is not a light or -1");
+  }
+  uint64_t expected = at + kSunLightBytes;
+  if (light >= 0) {
+    const uint64_t rampCountAt = expected + kSunShBytes + hd.probeCount * kSunBytesPerProbe;
+    if (available < rampCountAt + kSunRampCountBytes) {
+      return fail(name, "size: file has " + std::to_string(available) + " bytes but sunLight " +
+                            std::to_string(light) + " needs at least " +
+                            std::to_string(rampCountAt + kSunRampCountBytes) + " (truncated)");
+    }
+    const uint32_t ramps = readAt<uint32_t>(bytes.data() + rampCountAt);
+    if (ramps != 0 && ramps != hd.innerCellCount) {
+      return fail(name, "sunRampCount: " + std::to_string(ramps) + " is neither 0 nor " +
+                            "innerCellCount (" + std::to_string(hd.innerCellCount) + ")");
+    }
+    if (ramps != 0 && hd.dimension != 3) {
+      return fail(name, "sunRampCount: " + std::to_string(ramps) + " ramps in dimension " +
+                            std::to_string(hd.dimension) + " (only tetrahedra have ramps)");
+    }
+    expected = rampCountAt + kSunRampCountBytes + uint64_t(ramps) * kSunBytesPerRamp;
+  }
   if (available != expected) {
     return fail(name, "size: file has " + std::to_string(available) +
-                          " bytes but its header counts need " + std::to_string(expected) +
+                          " bytes but its header counts and sun block need " +
+                          std::to_string(expected) +
                           (available < expected ? " (truncated)" : " (trailing data)"));
   }
-  return expected;
+  return Status::success();
 }
 
 template <typename T>
@@ -210,6 +283,90 @@ Status validateVisibility(const ProbeVisibility& v, size_t np, std::string_view 
       if (v.moments[kVisibilityValuesPerTexel * (i * texels + t) + 1] > kMaxSigma) {
         return fail(name, "visibilityMoments[" + std::to_string(i) + "][" + std::to_string(t) +
                               "]: spread above half the distance range");
+      }
+    }
+  }
+  return Status::success();
+}
+
+// Whether every ramp is four finite floats or four NaNs (x NaN = no ramp), without branches on
+// the data (one per inner cell: a 100k-probe set has over half a million).
+bool rampsValid(const glm::vec4* ramps, size_t count) {
+  bool ok = true;
+#ifdef __SSE2__
+  // The four lanes at once: exponent bits all set (an infinity or NaN), and of those the NaNs
+  // (mantissa not zero); a ramp is fine with no such lane or four NaNs.
+  const __m128i exponent = _mm_set1_epi32(0x7f800000), mantissa = _mm_set1_epi32(0x007fffff);
+  const __m128i zero = _mm_setzero_si128();
+  for (size_t c = 0; c < count; ++c) {
+    const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&ramps[c]));
+    const __m128i special = _mm_cmpeq_epi32(_mm_and_si128(b, exponent), exponent);
+    const __m128i nan = _mm_andnot_si128(_mm_cmpeq_epi32(_mm_and_si128(b, mantissa), zero), special);
+    const int s = _mm_movemask_ps(_mm_castsi128_ps(special));
+    const int n = _mm_movemask_ps(_mm_castsi128_ps(nan));
+    ok &= (s == 0) | (n == 0xf);
+  }
+#else
+  for (size_t c = 0; c < count; ++c) {
+    uint32_t bits[4];
+    std::memcpy(bits, &ramps[c], 16);
+    uint32_t special = 0, nan = 0;  // lanes with exponent bits all set; lanes that are NaN
+    for (int k = 0; k < 4; ++k) {
+      const uint32_t exponentAllSet = uint32_t((bits[k] & 0x7f800000u) == 0x7f800000u);
+      special += exponentAllSet;
+      nan += exponentAllSet & uint32_t((bits[k] & 0x007fffffu) != 0);
+    }
+    ok &= special == 0 || nan == 4;
+  }
+#endif
+  return ok;
+}
+
+// The sun layer (ProbeSunLayer): nothing without a light; with one, a finite lobe, one
+// visibility in [0, 1] per probe, and no ramps or one per inner cell of a dimension 3 set,
+// each four finite values or four NaNs. Sizes must be checked first for probes; cells' too.
+Status validateSunLayer(const ProbeSet& s, std::string_view name) {
+  const ProbeSunLayer& sun = s.sun;
+  if (sun.light < -1) {
+    return fail(name, "sun.light: " + std::to_string(sun.light) + " is not a light or -1");
+  }
+  if (sun.light < 0) {
+    if (!sun.visibility.empty()) return fail(name, "sun.visibility: data without a light");
+    if (!sun.ramps.empty()) return fail(name, "sun.ramps: data without a light");
+    return Status::success();
+  }
+  for (int k = 0; k < kShL2Count; ++k) {
+    if (!finite(sun.sh.c[k])) return fail(name, "sun.sh[" + std::to_string(k) + "]: not finite");
+  }
+  const size_t np = s.positions.size();
+  if (sun.visibility.size() != np) return fail(name, "sun.visibility: size differs from positions");
+  if (!allInUnitInterval(sun.visibility.data(), np)) {
+    for (size_t i = 0; i < np; ++i) {
+      // Written so that NaN fails too.
+      if (!(sun.visibility[i] >= 0.0f && sun.visibility[i] <= 1.0f)) {
+        return fail(name, "sun.visibility[" + std::to_string(i) + "]: not in [0, 1]");
+      }
+    }
+  }
+  if (sun.ramps.empty()) return Status::success();
+  if (s.dimension != 3) {
+    return fail(name, "sun.ramps: ramps in dimension " + std::to_string(s.dimension) +
+                          " (only tetrahedra have ramps)");
+  }
+  if (sun.ramps.size() != size_t(s.innerCellCount)) {
+    return fail(name, "sun.ramps: size differs from innerCellCount");
+  }
+  if (!rampsValid(sun.ramps.data(), sun.ramps.size())) {
+    for (size_t c = 0; c < sun.ramps.size(); ++c) {
+      const glm::vec4 a = sun.ramps[c];
+      if (std::isnan(a.x)) {
+        if (!std::isnan(a.y) || !std::isnan(a.z) || !std::isnan(a.w)) {
+          return fail(name, "sun.ramps[" + std::to_string(c) +
+                                "]: x is NaN (no ramp) but y, z, w are not all NaN");
+        }
+      } else if (!finite(glm::vec3(a)) || !std::isfinite(a.w)) {
+        return fail(name, "sun.ramps[" + std::to_string(c) +
+                              "]: not finite (a ramp is four finite values, or NaN for none)");
       }
     }
   }
@@ -566,6 +723,7 @@ Status validateProbeSet(const ProbeSet& s, std::string_view name) {
                           " has no outer cells");
   }
   if (s.outerCells.size() != outer) return fail(name, "outerCells: size differs from cells");
+  if (Status v = validateSunLayer(s, name); !v) return v;
   // Positions, validity and SH are checked first as flat float arrays without branches (a
   // 100k-probe set has 10M of them); only when one is not finite does the loop below run, to
   // name it.
@@ -667,6 +825,17 @@ std::vector<uint8_t> serializeProbeSet(const ProbeSet& s, uint32_t version) {
     put(out, s.visibility.maxDistance.data(), s.visibility.maxDistance.size());
     put(out, s.visibility.moments.data(), s.visibility.moments.size());
   }
+  if (version >= 4) {
+    // A light below -1 is written as given (a bad file for tests); below 0, nothing follows.
+    put(out, &s.sun.light, 1);
+    if (s.sun.light >= 0) {
+      put(out, &s.sun.sh, 1);
+      put(out, s.sun.visibility.data(), s.sun.visibility.size());
+      const uint32_t ramps = uint32_t(s.sun.ramps.size());
+      put(out, &ramps, 1);
+      put(out, s.sun.ramps.data(), s.sun.ramps.size());
+    }
+  }
   const uint64_t sum = binaryFileChecksum(out, kProbeFileChecksumOffset, kProbeFileHeaderSize);
   std::memcpy(out.data() + kProbeFileChecksumOffset, &sum, 8);
   return out;
@@ -676,6 +845,9 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
   Result<uint64_t> size = checkHeader(bytes.data(), bytes.size(), name);
   if (!size) return Error{size.error()};
   const Header hd = decodeHeader(bytes.data());
+  if (hd.version >= 4) {
+    if (Status st = checkSunBlock(bytes, hd, name); !st) return Error{st.error()};
+  }
   if (binaryFileChecksum(bytes, kProbeFileChecksumOffset, kProbeFileHeaderSize) != hd.checksum) return fail(name, "checksum: payload does not match (corrupt file)");
 
   ProbeSet s;
@@ -713,6 +885,18 @@ Result<ProbeSet> parseProbeSet(std::span<const uint8_t> bytes, std::string_view 
     s.visibility.resolution = int32_t(hd.visibilityResolution);
     take(p, s.visibility.maxDistance, hd.probeCount);
     take(p, s.visibility.moments, size_t(hd.probeCount) * s.visibility.valuesPerProbe());
+  }
+  if (hd.version >= 4) {  // sizes checked by checkSunBlock
+    std::memcpy(&s.sun.light, p, kSunLightBytes);
+    p += kSunLightBytes;
+    if (s.sun.light >= 0) {
+      std::memcpy(&s.sun.sh, p, kSunShBytes);
+      p += kSunShBytes;
+      take(p, s.sun.visibility, hd.probeCount);
+      const uint32_t ramps = readAt<uint32_t>(p);
+      p += kSunRampCountBytes;
+      take(p, s.sun.ramps, ramps);
+    }
   }
   Status st = validateProbeSet(s, name);
   if (!st) return Error{st.error()};

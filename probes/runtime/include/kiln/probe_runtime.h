@@ -36,6 +36,10 @@ struct ProbeLocation {
   std::array<float, 4> barycentric{};  // the cell's own (barycentric) weights
   uint16_t steps = 0;               // cells visited by the walk (diagnostics)
   bool bruteForce = false;          // the walk gave up and a scan of all cells was used
+  // The weights include the probes' visibility of the point (the set has visibility maps and
+  // the blend asked for them). Only then does interpolateProbes apply the sun layer's ramps:
+  // a plain blend cannot tell a probe behind a wall, and a ramp would carry sun through it.
+  bool visibilityWeighted = false;
 };
 
 // Cells a walk may visit before it falls back to scanning every cell.

@@ -97,6 +97,31 @@ struct ProbeVisibility {
   }
 };
 
+// The sun layer (docs/probes.md, "Sun shadows"): sharp shadow edges of one baked directional
+// light for objects lit by the probes. A probe's SH holds that light's direct light times
+// visibility[i], the share of the light reaching probe i unblocked (in [0, 1]); blended, the
+// light's share is the weights' mix of those, which smears a shadow edge over the cells that
+// straddle it. The shadow of a straight edge under a directional light is bounded by a plane
+// that contains the light's direction, so in a tetrahedron the light's share is well described
+// by a ramp across one plane: S(p) = clamp(dot(b, ramps[cell]), 0, 1), where b is p's
+// barycentric coordinates in the cell and ramps[cell][k] the ramp's (unclamped) value at the
+// cell's vertex k. The blend replaces the mixed share by S: sh += (S - sum_k w_k
+// visibility[probe_k]) * this->sh, where this->sh is the light's direct light at a fully lit
+// point. ramps[cell].x NaN = no ramp (the plain blend: edges that no plane fits, such as
+// corners and stripes, or cells the light's share does not vary in). Outer cells have none.
+// validateProbeSet's rules: light -1 with visibility and ramps empty, or light >= 0 (an index
+// into the scene's lights, unbounded here like occlusionLights) with sh finite, visibility one
+// value in [0, 1] per probe, ramps empty or one per inner cell of a dimension 3 set, each all
+// four finite or all four NaN. Stored in .kprobe version 4 (below).
+struct ProbeSunLayer {
+  int32_t light = -1;  // the scene light (KHR_lights_punctual index); -1 = no layer
+  ShL2Rgb sh;          // radiance SH of the light's direct light on a fully lit probe
+  std::vector<float> visibility;  // per probe, in [0, 1]
+  std::vector<glm::vec4> ramps;   // per inner cell (dimension 3) or empty, see above
+
+  bool empty() const { return light < 0; }
+};
+
 // What one step of the walk through a tetrahedron reads, in one 64-byte record (derived from
 // positions and cells by prepareProbeLookup; not stored in the .kprobe file): the barycentric
 // coordinates of p in float, l_k = c_k + x[k] q.x + y[k] q.y + z[k] q.z with q = p - origin,
@@ -132,6 +157,7 @@ struct ProbeSet {
   std::vector<glm::vec4> occlusion;
   std::array<int32_t, kProbeOcclusionChannels> occlusionLights{-1, -1, -1, -1};
   ProbeVisibility visibility;  // empty = blend by barycentric weights alone
+  ProbeSunLayer sun;           // empty = no sharp sun shadows
   // Derived walk records, one per inner cell (dimension 3): filled by prepareProbeLookup,
   // which buildProbeTopology and the .kprobe readers call. Empty (or stale in size) = the
   // lookup walks with the exact predicates alone. Call prepareProbeLookup again after
@@ -171,14 +197,16 @@ void buildProbeSeedGrid(ProbeSet& set, int targetCellsPerSeed = 4);
 // symmetric, values finite, occlusion empty or one entry per probe in [0, 1], channel lights
 // >= -1, visibility empty or a resolution in [kMinVisibilityResolution,
 // kMaxVisibilityResolution] with one finite maxDistance > 0 and one map per probe whose
-// spreads are at most 1/2 (no distribution on [0, 1] spreads more). Messages read "<name>: <field>[i]: problem". Safe for untrusted
-// data.
+// spreads are at most 1/2 (no distribution on [0, 1] spreads more), and a sun layer that is
+// empty (light -1, no visibility, no ramps) or has a light >= 0, a finite lobe, one visibility
+// in [0, 1] per probe and no ramps or one per inner cell (dimension 3 only), each four finite
+// values or four NaNs. Messages read "<name>: <field>[i]: problem". Safe for untrusted data.
 Status validateProbeSet(const ProbeSet& set, std::string_view name);
 
-// .kprobe file, version 3, little-endian:
+// .kprobe file, version 4, little-endian:
 //   header (72 bytes): "KPRB", u32 version, u32 dimension, u32 probeCount, u32 cellCount,
 //     u32 innerCellCount, u32 gridSize[3], f32 gridMin[3], f32 gridMax[3],
-//     u32 visibilityResolution (version 3; 0 = no visibility; "reserved", 0, before),
+//     u32 visibilityResolution (version 3 on; 0 = no visibility; "reserved", 0, before),
 //     u64 checksum = FNV-1a 64 of header bytes [0, 64) followed by the whole payload;
 //   payload: f32 positions[probeCount][3], f32 sh[probeCount][9][3] (coefficient-major,
 //     RGB innermost), f32 validity[probeCount], i32 cells[cellCount][4],
@@ -188,19 +216,26 @@ Status validateProbeSet(const ProbeSet& set, std::string_view name);
 //     unused), f32 occlusion[probeCount][4] (each in [0, 1]; unused channels 1),
 //     from version 3 on, when visibilityResolution R > 0: f32 visibilityMaxDistance
 //     [probeCount], u16 visibilityMoments[probeCount][R * R][3] ({mu, sigma, far}, see
-//     ProbeVisibility);
+//     ProbeVisibility),
+//     from version 4 on: i32 sunLight (ProbeSunLayer::light; -1 = no sun layer, and nothing
+//     more follows), and when sunLight >= 0: f32 sunSh[9][3], f32 sunVisibility[probeCount],
+//     u32 rampCount (0, or innerCellCount in dimension 3), f32 ramps[rampCount][4] (x NaN =
+//     no ramp, then y, z, w NaN too);
 //   where outerCount = cellCount - innerCellCount.
 // Version 1 is version 2 without the occlusion block, version 2 is version 3 without
-// visibility; the reader accepts all three and gives a version 1 file occlusion 1 in every
-// channel and no channel lights, and version 1 and 2 files no visibility (plain blending).
-inline constexpr uint32_t kProbeFileVersion = 3;
+// visibility, version 3 is version 4 without the sun block; the reader accepts all four and
+// gives a version 1 file occlusion 1 in every channel and no channel lights, version 1 and 2
+// files no visibility (plain blending), and version 1 to 3 files no sun layer. The header's
+// counts bound the file's size (the sun block from sunLight -1 alone to a full layer with
+// ramps), so the reader allocates nothing a corrupt count asks for beyond that.
+inline constexpr uint32_t kProbeFileVersion = 4;
 inline constexpr uint32_t kProbeFileMinVersion = 1;
 inline constexpr size_t kProbeFileHeaderSize = 72;
 inline constexpr size_t kProbeFileChecksumOffset = 64;  // the header's checksum field
 
 // Serialization (no validation: write what is given, so tests can craft bad files). `version`
-// 1 drops the occlusion and 2 the visibility (for readers that predate them); an empty
-// `occlusion` is written as 1.
+// 1 drops the occlusion, 2 the visibility and 3 the sun layer (for readers that predate them);
+// an empty `occlusion` is written as 1.
 std::vector<uint8_t> serializeProbeSet(const ProbeSet& set, uint32_t version = kProbeFileVersion);
 // Parses and validates a whole file image; `name` prefixes messages. Never allocates more than
 // the input size justifies. Safe for untrusted input.

@@ -1,0 +1,230 @@
+// The sun layer (kiln/probe_set.h, ProbeSunLayer; probes/sun_shadows.h): ramps fitted to a
+// shadow whose boundary is known in closed form, and the blend that uses them.
+//
+// The scene: a ground quad at y = 0 and a roof slab over x <= 0 (y in [3, 3.2]), under a
+// directional light travelling along t = (a, -b, c) (b > 0, a > 0: from the roof's side).
+// A point p below the roof sees the light unless its ray towards the light, -t, enters the
+// roof (through its underside or its end face x = 0): the ray reaches y = 3.2 at
+// x = p.x - a (3.2 - p.y) / b, so p is in shadow exactly when p.x < a (3.2 - p.y) / b. The
+// boundary is the plane through the roof's top edge {x = 0, y = 3.2} that contains t.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "kiln/probe_runtime.h"
+#include "probes/probe_baker.h"
+#include "probes/sun_shadows.h"
+#include "src/sh_projection.h"
+#include "tests/test_util.h"
+
+namespace kiln {
+namespace {
+
+using glm::vec3;
+using glm::vec4;
+
+const vec3 kTravel = glm::normalize(vec3(1.0f, -1.5f, 0.3f));
+constexpr float kSunLux = 4.0f;
+
+// Signed distance of p from the shadow boundary, positive on the lit side.
+float litSide(vec3 p) {
+  // The plane contains the edge's direction (0, 0, 1) and the travel direction t: its normal
+  // is their cross product, oriented so that +x (away from the roof) is lit.
+  vec3 n = glm::normalize(glm::cross(vec3(0, 0, 1), kTravel));
+  if (n.x < 0.0f) n = -n;
+  return glm::dot(n, p - vec3(0.0f, 3.2f, 0.0f));
+}
+
+struct SunWorld {
+  Scene scene;
+  std::unique_ptr<Tracer> tracer;
+  explicit SunWorld(float slatGap = 0.0f) {
+    const uint32_t grey = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+    test::addQuad(scene, "ground", vec3(-30, 0, 30), vec3(30, 0, 30), vec3(30, 0, -30),
+                  vec3(-30, 0, -30), grey);
+    if (slatGap > 0.0f) {
+      // A roof of thin slats (2 cm) along z, each slatGap wide with slatGap between: stripes
+      // of light and shade about slatGap wide each, which no single plane bounds.
+      for (int k = 0; k < 40; ++k) {
+        const float x1 = -2.0f * slatGap * float(k);
+        test::addBox(scene, "slat" + std::to_string(k), vec3(x1 - slatGap, 3.0f, -30.0f),
+                     vec3(x1, 3.02f, 30.0f), grey, false);
+      }
+    } else {
+      test::addBox(scene, "roof", vec3(-30.0f, 3.0f, -30.0f), vec3(0.0f, 3.2f, 30.0f), grey,
+                   false);
+    }
+    scene.lights.push_back(test::directionalLight(kTravel, kSunLux));
+    scene.updateBounds();
+    tracer = std::move(Tracer::create(scene)).value();
+  }
+  Integrator integrator() const {
+    return Integrator(scene, *tracer, probeIntegratorSettings(scene, ProbeBakeSettings{}));
+  }
+};
+
+// A regular tetrahedron of edge `edge` centred at c, positively oriented.
+std::array<vec3, 4> tetrahedron(vec3 c, float edge) {
+  const float h = edge / (2.0f * std::sqrt(2.0f));
+  std::array<vec3, 4> t = {c + h * vec3(1, 1, 1), c + h * vec3(1, -1, -1),
+                           c + h * vec3(-1, 1, -1), c + h * vec3(-1, -1, 1)};
+  const float o = glm::dot(glm::cross(t[1] - t[0], t[2] - t[0]), t[3] - t[0]);
+  if (o < 0.0f) std::swap(t[2], t[3]);
+  return t;
+}
+
+std::array<float, 4> sharesOf(const Integrator& in, const std::array<vec3, 4>& t) {
+  std::array<float, 4> s{};
+  for (int k = 0; k < 4; ++k) s[size_t(k)] = sunShare(in, 0, t[size_t(k)], uint64_t(k));
+  return s;
+}
+
+// The ramp is the analytic step: its zero crossing (value 1/2) lies on the boundary plane
+// and its gradient is the plane's normal, perpendicular to the light; clamped, it is the
+// light's share (0 or 1) at every point more than its width from the plane.
+TEST(ProbeSun, RampFollowsTheShadowPlaneOfAStraightEdge) {
+  const SunWorld w;
+  const Integrator in = w.integrator();
+  const vec3 centre(kTravel.x / -kTravel.y * 1.7f, 1.5f, 0.0f);
+  ASSERT_NEAR(litSide(centre), 0.0f, 1e-5f);  // on the boundary
+  const std::array<vec3, 4> t = tetrahedron(centre + vec3(0.05f, 0.0f, 0.0f), 1.2f);
+  const vec4 a = fitSunRamp(in, 0, t, sharesOf(in, t), 11);
+  ASSERT_FALSE(std::isnan(a.x)) << "a straight edge's shadow through the cell gets a ramp";
+  // The ramp's gradient g from its four values: solve [t_k - t_0] g = a_k - a_0.
+  const glm::mat3 m = glm::transpose(glm::mat3(t[1] - t[0], t[2] - t[0], t[3] - t[0]));
+  const vec3 g = glm::inverse(m) * vec3(a[1] - a[0], a[2] - a[0], a[3] - a[0]);
+  vec3 n = glm::normalize(glm::cross(vec3(0, 0, 1), kTravel));
+  if (n.x < 0.0f) n = -n;
+  EXPECT_NEAR(glm::dot(glm::normalize(g), kTravel), 0.0f, 2e-3f);  // contains the light
+  EXPECT_GT(glm::dot(glm::normalize(g), n), 0.99999f);  // the plane's normal, within 0.26 deg
+  const float width = 1.0f / glm::length(g);  // from value 0 to 1
+  EXPECT_LE(width, 0.0105f) << "a hard shadow gets the narrowest ramp";
+  // The half-value surface passes through the plane at the cell's centre within 1 mm.
+  const vec3 mid = 0.25f * (t[0] + t[1] + t[2] + t[3]);
+  const float atMid = a[0] + glm::dot(g, mid - t[0]);
+  EXPECT_NEAR((0.5f - atMid) / glm::length(g), -litSide(mid), 1e-3f);
+  // Every point more than 2 cm from the plane: the clamped ramp is the share, exactly.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int checked = 0;
+  for (int i = 0; i < 2000; ++i) {
+    float b[4], sum = 0.0f;
+    for (float& x : b) sum += (x = -std::log(1.0f - u(rng)));
+    vec3 p(0.0f);
+    float r = 0.0f;
+    for (int k = 0; k < 4; ++k) {
+      p += b[k] / sum * t[size_t(k)];
+      r += b[k] / sum * a[k];
+    }
+    if (std::abs(litSide(p)) < 0.02f) continue;
+    ++checked;
+    const float expected = litSide(p) > 0.0f ? 1.0f : 0.0f;
+    EXPECT_EQ(std::clamp(r, 0.0f, 1.0f), expected) << p.x << " " << p.y << " " << p.z;
+    EXPECT_EQ(sunShare(in, 0, p, uint64_t(i)), expected);  // the tracer agrees
+  }
+  EXPECT_GT(checked, 1800);
+}
+
+// No ramp where the plain blend is exact (a cell in full sun) or where no plane bounds the
+// shade (stripes under slats, 3 per cell).
+TEST(ProbeSun, NoRampInFullSunOrUnderStripes) {
+  const SunWorld open;
+  const Integrator in = open.integrator();
+  const std::array<vec3, 4> lit = tetrahedron(vec3(10.0f, 1.5f, 0.0f), 1.2f);
+  EXPECT_TRUE(std::isnan(fitSunRamp(in, 0, lit, sharesOf(in, lit), 3).x));
+  const SunWorld slats(0.15f);
+  const Integrator striped = slats.integrator();
+  int ramps = 0;
+  for (int i = 0; i < 8; ++i) {
+    const std::array<vec3, 4> t = tetrahedron(vec3(-4.0f + 0.37f * float(i), 1.5f, 0.0f), 1.2f);
+    const std::array<float, 4> s = sharesOf(striped, t);
+    ramps += std::isnan(fitSunRamp(striped, 0, t, s, uint64_t(i)).x) ? 0 : 1;
+  }
+  EXPECT_EQ(ramps, 0);
+}
+
+// Through the bake and the blend: points beside the edge, where a cell's probes on both sides
+// mix lit and shaded light, get the light as SH baked at the point has it (its L00 within
+// the indirect light's interpolation error), where the plain blend (no layer) is off by
+// much more; every blended result keeps irradiance >= 0.
+TEST(ProbeSun, BlendMatchesTheCentreBakeBesideTheEdge) {
+  const SunWorld w;
+  std::vector<vec3> grid;
+  for (int x = -3; x <= 3; ++x)
+    for (int y = 0; y <= 2; ++y)
+      for (int z = -1; z <= 1; ++z) grid.push_back(vec3(0.9f * float(x) + 1.3f, 0.3f + 1.1f * float(y), 1.0f * float(z)));
+  ProbeBakeSettings bake;  // with visibility maps: the layer applies to the visibility blend
+  bake.rays = 1024;
+  ProbeBakeReport report;
+  Result<ProbeSet> set = bakeProbes(w.scene, *w.tracer, grid, bake, nullptr, nullptr, &report);
+  ASSERT_TRUE(bool(set)) << set.error();
+  ASSERT_EQ(set->sun.light, 0);
+  EXPECT_GT(report.sunRampCells, 0);
+  bake.sunShadows = false;
+  Result<ProbeSet> plain = bakeProbes(w.scene, *w.tracer, grid, bake);
+  ASSERT_TRUE(bool(plain)) << plain.error();
+  EXPECT_TRUE(plain->sun.empty());
+  // The same light in the probes either way (band 0 is kept by deringing).
+  for (size_t i = 0; i < grid.size(); ++i)
+    EXPECT_NEAR(luminance(set->sh[i].c[0]), luminance(plain->sh[i].c[0]),
+                1e-5f * luminance(plain->sh[i].c[0]))
+        << i;
+  const Integrator in = w.integrator();
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> ux(-1.0f, 3.5f), uy(0.4f, 2.4f), uz(-0.8f, 0.8f);
+  float worstLayer = 0.0f, worstPlain = 0.0f;
+  int points = 0;
+  for (int i = 0; i < 400 && points < 40; ++i) {
+    const vec3 p(ux(rng), uy(rng), uz(rng));
+    const float d = litSide(p);
+    if (std::abs(d) < 0.05f || std::abs(d) > 0.5f) continue;  // beside the edge
+    ++points;
+    const ProbeSample truth = bakeProbe(in, p, 1000 + uint64_t(i), 1024, 1);
+    const float t = luminance(truth.sh.c[0]);
+    const ShL2Rgb layer = sampleProbes(*set, p);
+    const ShL2Rgb blend = sampleProbes(*plain, p);
+    auto off = [&](const ShL2Rgb& e) {
+      const float r = luminance(e.c[0]) / t;
+      return std::max(r, 1.0f / r);
+    };
+    worstLayer = std::max(worstLayer, off(layer));
+    worstPlain = std::max(worstPlain, off(blend));
+    const vec3 minE = minIrradiance(layer);
+    EXPECT_GE(std::min({minE.x, minE.y, minE.z}), -1e-4f * kSunLux) << p.x << " " << p.y;
+  }
+  ASSERT_GE(points, 30);
+  std::cout << "beside the edge: worst L00 ratio " << worstLayer << " with the layer, "
+            << worstPlain << " plain\n";
+  EXPECT_LT(worstLayer, 1.3f);
+  EXPECT_GT(worstPlain, 2.0f);
+}
+
+// Ramps are a function of the cell and the seed alone: the same bits on 1 and 2 threads.
+TEST(ProbeSun, RampsDoNotDependOnTheThreadCount) {
+  const SunWorld w;
+  std::vector<vec3> grid;
+  for (int x = 0; x < 5; ++x)
+    for (int y = 0; y < 3; ++y)
+      for (int z = 0; z < 3; ++z) grid.push_back(vec3(-1.0f + 0.8f * float(x), 0.5f + 0.9f * float(y), 0.7f * float(z)));
+  ProbeBakeSettings bake;
+  bake.rays = 64;
+  bake.visibilityResolution = 0;
+  bake.threads = 1;
+  Result<ProbeSet> one = bakeProbes(w.scene, *w.tracer, grid, bake);
+  bake.threads = 2;
+  Result<ProbeSet> two = bakeProbes(w.scene, *w.tracer, grid, bake);
+  ASSERT_TRUE(bool(one) && bool(two));
+  ASSERT_EQ(one->sun.ramps.size(), two->sun.ramps.size());
+  ASSERT_FALSE(one->sun.ramps.empty());
+  EXPECT_EQ(std::memcmp(one->sun.ramps.data(), two->sun.ramps.data(),
+                        one->sun.ramps.size() * sizeof(vec4)),
+            0);
+  EXPECT_EQ(one->sun.visibility, two->sun.visibility);
+}
+
+}  // namespace
+}  // namespace kiln
