@@ -6,9 +6,10 @@
 // ramp as wide as the penumbra for a soft light). The fit: classify points sampled in the
 // cell by shadow rays; search the plane's normal over directions perpendicular to the light
 // (the best split of the points along each); locate the edge precisely by bisection from the
-// points nearest the split; fit the line through those edge points in the plane
-// perpendicular to the light; choose the ramp's width; and keep the ramp only if, at fresh
-// points, it is clearly closer to the light's share than the plain blend of the probes'.
+// points nearest the split (in two rounds); fit the line through those edge points in the
+// plane perpendicular to the light; choose the ramp's width; and keep the ramp only if at
+// most kMaxWrongPoints of the 64 interior points (32 of them fresh) disagree with it and it
+// is clearly closer to the light's share than the plain blend of the probes' shares.
 #include "probes/sun_shadows.h"
 
 #include <algorithm>

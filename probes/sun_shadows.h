@@ -28,9 +28,11 @@ float sunShare(const Integrator& integrator, uint32_t light, glm::vec3 q, uint64
 inline constexpr uint32_t kSunRampSamples = 32;
 
 // The ramp of tetrahedron `corners` (positively oriented) whose probes hold the light's
-// shares `shares` (ProbeSunLayer::ramps): its value at the four vertices, or NaN in x when
-// the plain blend (the shares mixed by barycentric weights) fits the light's share inside the
-// cell as well as the best ramp does. Samples the cell with `key` (deterministic).
+// shares `shares` (ProbeSunLayer::ramps): its value at the four vertices, or NaN (all four)
+// when the light's share does not vary in the cell, when the best ramp is wrong at more than
+// 3 of 64 interior points (two edges, stripes), or when the plain blend (the shares mixed by
+// barycentric weights) fits the share about as well. Samples the cell with `key`
+// (deterministic).
 glm::vec4 fitSunRamp(const Integrator& integrator, uint32_t light,
                      const std::array<glm::vec3, 4>& corners, const std::array<float, 4>& shares,
                      uint64_t key);
