@@ -22,6 +22,8 @@
 //     is at most 2x). bytes_per_probe is the .kprobe size (serializeProbeSet) over the probe
 //     count, with the visibility block (visibility:1) and without it (0); hidden_share is the
 //     share of the blend's probe tests that find the point (partly) hidden (v < 1).
+// BM_BlendHinted/visibility:2: the visibility-weighted blend on the same set with a sun layer
+// (a ramp in every inner cell).
 // Tetrahedralization: buildProbeTopology (Delaunay + outer cells + seed grid) with TetGen and
 // with CGAL for 1k, 10k and 100k random probes; BM_CgalDelaunay, a bare CGAL Delaunay of the
 // same points; BM_TetrahedralizeOverCgalDelaunay, the two in each iteration and their ratio.
@@ -263,17 +265,39 @@ const VisibilityFixture& visibilityFixture(int probes) {
   return *slot;
 }
 
+// The visibility fixture's set with a sun layer whose every inner cell has a ramp (the worst
+// case: a bake gives ramps only to cells a shadow edge crosses), random shares and ramps.
+const ProbeSet& sunFixture(int probes) {
+  static std::map<int, std::unique_ptr<ProbeSet>> cache;
+  auto& slot = cache[probes];
+  if (!slot) {
+    slot = std::make_unique<ProbeSet>(visibilityFixture(probes).set);
+    ProbeSet& s = *slot;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> share(0.0f, 1.0f), ramp(-20.0f, 20.0f);
+    s.sun.light = 0;
+    s.sun.sh.addSample(glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f)), glm::vec3(3.0f), 1.0f);
+    for (int32_t i = 0; i < s.probeCount(); ++i) s.sun.visibility.push_back(share(rng));
+    for (int32_t c = 0; c < s.innerCellCount; ++c)
+      s.sun.ramps.push_back(glm::vec4(ramp(rng), ramp(rng), ramp(rng), ramp(rng)));
+  }
+  return *slot;
+}
+
+// range(1): 0 plain blend, 1 visibility-weighted, 2 visibility-weighted with a sun layer
+// (a ramp in every cell).
 void BM_BlendHinted(benchmark::State& state) {
   const VisibilityFixture& f = visibilityFixture(int(state.range(0)));
+  const ProbeSet& set = state.range(1) == 2 ? sunFixture(int(state.range(0))) : f.set;
   ProbeBlendSettings blend;
   blend.visibility = state.range(1) != 0;
   const std::vector<glm::vec3> path = pathPoints();
   int32_t hint = -1;
   for (auto _ : state) {
     for (const glm::vec3& p : path) {
-      const ProbeLocation loc = locateProbe(f.set, p, hint, blend);
+      const ProbeLocation loc = locateProbe(set, p, hint, blend);
       hint = loc.cell;
-      const ShL2Rgb sh = interpolateProbes(f.set, loc);
+      const ShL2Rgb sh = interpolateProbes(set, loc);
       benchmark::DoNotOptimize(sh);
     }
   }
@@ -369,7 +393,9 @@ BENCHMARK(BM_BlendHinted)
     ->Args({10000, 0})
     ->Args({10000, 1})
     ->Args({100000, 0})
-    ->Args({100000, 1});
+    ->Args({100000, 1})
+    ->Args({1000, 2})
+    ->Args({100000, 2});
 BENCHMARK(BM_CgalDelaunay)->ArgName("probes")->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_CgalDelaunay)->ArgName("probes")->Arg(100000)->Iterations(1)->Unit(
     benchmark::kMillisecond);
