@@ -103,11 +103,12 @@ struct ProbeVisibility {
 // light's share is the weights' mix of those, which smears a shadow edge over the cells that
 // straddle it. The shadow of a straight edge under a directional light is bounded by a plane
 // that contains the light's direction, so in a tetrahedron the light's share is well described
-// by a ramp across one plane: S(p) = clamp(dot(b, ramps[cell]), 0, 1), where b is p's
-// barycentric coordinates in the cell and ramps[cell][k] the ramp's (unclamped) value at the
-// cell's vertex k. The blend replaces the mixed share by S: sh += (S - sum_k w_k
-// visibility[probe_k]) * this->sh, where this->sh is the light's direct light at a fully lit
-// point. ramps[cell].x NaN = no ramp (the plain blend: edges that no plane fits, such as
+// by a ramp across one plane: S(p) = dot(b, ramps[cell]), where b is p's barycentric
+// coordinates in the cell and ramps[cell][k] the ramp's (unclamped) value at the cell's
+// vertex k. A visibility-weighted blend replaces the mixed share by S, clamped to the shares
+// of the probes that see p: sh += (S - sum_k w_k visibility[probe_k]) * this->sh, where
+// this->sh is the light's direct light at a fully lit point (a plain blend, which cannot tell
+// a probe behind a wall, leaves the layer out). ramps[cell].x NaN = no ramp (the plain blend: edges that no plane fits, such as
 // corners and stripes, or cells the light's share does not vary in). Outer cells have none.
 // validateProbeSet's rules: light -1 with visibility and ramps empty, or light >= 0 (an index
 // into the scene's lights, unbounded here like occlusionLights) with sh finite, visibility one
