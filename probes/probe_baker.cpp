@@ -460,14 +460,13 @@ Result<ProbeSet> bakeProbes(const Scene& scene, const Tracer& tracer,
   }
 
   const int32_t sun = settings.sunShadows ? sunLayerLight(scene, integrator.settings()) : -1;
-  ShL2Rgb sunDelta;
   if (sun >= 0) {
     set.sun.light = sun;
     const Light& light = scene.lights[size_t(sun)];
     // The light's raw delta, c_i = E Y_i(s): what a probe's SH holds of the light before
     // deringing (which the probes keep as before, on the sum; docs/probes.md, "Sun shadows").
-    sunDelta.addSample(-glm::normalize(light.direction), light.color * light.intensity, 1.0f);
-    set.sun.sh = sunDelta;
+    set.sun.sh = ShL2Rgb{};
+    set.sun.sh.addSample(-glm::normalize(light.direction), light.color * light.intensity, 1.0f);
     set.sun.visibility.resize(count);
   }
   for (size_t i = 0; i < count; ++i) {

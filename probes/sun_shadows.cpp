@@ -178,17 +178,30 @@ class RampFit {
     return std::abs(glm::dot(normal_, train_[j].p) - offset_);
   }
 
-  // RMS spread of the edge points across the light (in the plane perpendicular to it).
-  float edgeSpread() const {
-    glm::vec2 m(0.0f);
-    for (const vec3& e : edge_) m += glm::vec2(glm::dot(u_, e), glm::dot(v_, e));
-    m /= float(std::max<size_t>(edge_.size(), 1));
-    float sum = 0.0f;
+  // Second moments of the edge points' coordinates across the light (in the plane
+  // perpendicular to it), about their mean.
+  struct EdgeMoments {
+    float xx = 0.0f, xy = 0.0f, yy = 0.0f;
+  };
+  EdgeMoments edgeMoments() const {
+    glm::vec2 mean(0.0f);
+    for (const vec3& e : edge_) mean += glm::vec2(glm::dot(u_, e), glm::dot(v_, e));
+    mean /= float(std::max<size_t>(edge_.size(), 1));
+    EdgeMoments m;
     for (const vec3& e : edge_) {
-      const glm::vec2 d = glm::vec2(glm::dot(u_, e), glm::dot(v_, e)) - m;
-      sum += glm::dot(d, d);
+      const glm::vec2 d = glm::vec2(glm::dot(u_, e), glm::dot(v_, e)) - mean;
+      m.xx += d.x * d.x;
+      m.xy += d.x * d.y;
+      m.yy += d.y * d.y;
     }
-    return std::sqrt(sum / float(std::max<size_t>(edge_.size(), 1)));
+    return m;
+  }
+
+  // Whether the edge points spread (RMS, across the light) over more than kMinSpread of the
+  // cell: enough to fix the plane's direction.
+  bool spreadFixesDirection(const EdgeMoments& m) const {
+    const float minSpread = kMinSpread * extent_;
+    return m.xx + m.yy > minSpread * minSpread * float(edge_.size());
   }
 
   // Points on the edge from the current plane: bisection from the shaded points nearest it,
@@ -214,7 +227,7 @@ class RampFit {
         if (glm::distance(train_[j].p, p) < glm::distance(train_[nearest].p, p)) nearest = j;
       bisect(p, train_[nearest].p);
     }
-    if (edgeSpread() > kMinSpread * extent_) return;
+    if (spreadFixesDirection(edgeMoments())) return;
     for (const std::vector<uint32_t>* side : {&lit, &shaded}) {
       if (side->empty()) continue;
       const uint32_t nearest = *std::min_element(
@@ -233,19 +246,9 @@ class RampFit {
   // than kMinSpread of the cell; else the current normal is kept), their mean its offset,
   // and the points' shares its lit side (the search's sign is a guess when many splits tie).
   void fitPlane() {
-    glm::vec2 mean(0.0f);
-    for (const vec3& e : edge_) mean += glm::vec2(glm::dot(u_, e), glm::dot(v_, e));
-    mean /= float(edge_.size());
-    float sxx = 0.0f, sxy = 0.0f, syy = 0.0f;
-    for (const vec3& e : edge_) {
-      const glm::vec2 d = glm::vec2(glm::dot(u_, e), glm::dot(v_, e)) - mean;
-      sxx += d.x * d.x;
-      sxy += d.x * d.y;
-      syy += d.y * d.y;
-    }
-    const float minSpread = kMinSpread * extent_;
-    if (sxx + syy > minSpread * minSpread * float(edge_.size())) {
-      const float axis = 0.5f * std::atan2(2.0f * sxy, sxx - syy);
+    const EdgeMoments m = edgeMoments();
+    if (spreadFixesDirection(m)) {
+      const float axis = 0.5f * std::atan2(2.0f * m.xy, m.xx - m.yy);
       const vec3 along = std::cos(axis) * u_ + std::sin(axis) * v_;
       const vec3 fitted = glm::normalize(glm::cross(s_, along));
       normal_ = glm::dot(fitted, normal_) < 0.0f ? -fitted : fitted;

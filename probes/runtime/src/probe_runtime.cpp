@@ -1177,12 +1177,13 @@ ShL2Rgb interpolateProbes(const ProbeSet& s, const ProbeLocation& loc) noexcept 
                          loc.barycentric[2] * a.z + loc.barycentric[3] * a.w;
       // The ramp is geometry-blind: across a wall it would light a closed room. So it only
       // chooses within the shares of the probes that see the point (visibility weight at
-      // least a tenth of the barycentric one).
+      // least kSeen of the barycentric one).
+      constexpr float kSeen = 0.1f;
       float mixed = 0.0f, lo = 1.0f, hi = 0.0f;
       for (int k = 0; k < 4; ++k) {
         const float v = s.sun.visibility[size_t(loc.probes[k])];
         mixed += loc.weights[k] * v;
-        if (loc.weights[k] > 0.0f && loc.weights[k] >= 0.1f * loc.barycentric[k]) {
+        if (loc.weights[k] > 0.0f && loc.weights[k] >= kSeen * loc.barycentric[k]) {
           lo = std::min(lo, v);
           hi = std::max(hi, v);
         }
