@@ -18,6 +18,7 @@
 #include <numeric>
 #include <vector>
 
+#include "src/distributed.h"
 #include "src/math.h"
 #include "src/parallel.h"
 #include "src/sampling.h"
@@ -383,8 +384,12 @@ bool bakeSunRamps(const Integrator& integrator, ProbeSet& set, uint64_t seed, in
   options.grain = 16;
   options.progress = progress;
   options.cancel = cancel;
-  return parallelFor(
-      cells,
+  // Distributed bakes (src/distributed.h): cells dealt across the ranks, every rank gets
+  // every ramp (each cell's key is its index, so the ramps are those of one process).
+  const WorkSplit split = splitWork(cells, 1);
+  if (progress) progress->splitAcrossRanks();
+  const bool done = parallelForLocal(
+      split,
       [&](size_t begin, size_t end) {
         for (size_t c = begin; c < end; ++c) {
           const glm::ivec4 cell = set.cells[c];
@@ -399,6 +404,8 @@ bool bakeSunRamps(const Integrator& integrator, ProbeSet& set, uint64_t seed, in
         }
       },
       options);
+  const bool ok = done && !(cancel && cancel->load());
+  return bool(exchangeItems(split, set.sun.ramps, 1, true, ok, !ok, progress)) && ok;
 }
 
 }  // namespace kiln

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -17,6 +18,7 @@
 #include <sstream>
 #include <thread>
 
+#include "kiln/probe_set.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
@@ -161,6 +163,27 @@ TEST_F(MpiTest, ProbeFileByteIdenticalToOneProcess) {
   ASSERT_FALSE(expected.empty());
   for (auto [ranks, threads] : {std::pair{2, 1}, {3, 2}}) {
     const std::string path = dir + "/split" + std::to_string(ranks) + ".kprobe";
+    ASSERT_EQ(run(mpirun(ranks) + base + path + " --threads " + std::to_string(threads), &out), 0)
+        << out;
+    EXPECT_TRUE(readBytes(path) == expected) << ranks << " ranks";
+  }
+}
+
+// two_rooms as shipped (its sun baked): the sun layer's ramps, their cells dealt across the
+// ranks, give the .kprobe of one process.
+TEST_F(MpiTest, SunRampsByteIdenticalToOneProcess) {
+  const std::string base = std::string(test::kilnExe()) + " probes bake " + test::scenesDir() +
+                           "/two_rooms.gltf --rays 256 -q --out ";
+  std::string out;
+  ASSERT_EQ(run(base + dir + "/sun_one.kprobe --threads 2", &out), 0) << out;
+  const std::string expected = readBytes(dir + "/sun_one.kprobe");
+  Result<ProbeSet> one = loadProbeFile(dir + "/sun_one.kprobe");
+  ASSERT_TRUE(bool(one)) << one.error();
+  size_t ramps = 0;
+  for (const glm::vec4& r : one->sun.ramps) ramps += std::isnan(r.x) ? 0 : 1;
+  ASSERT_GT(ramps, 0u) << "the test needs cells with a ramp";
+  for (auto [ranks, threads] : {std::pair{2, 1}, {3, 2}}) {
+    const std::string path = dir + "/sun_split" + std::to_string(ranks) + ".kprobe";
     ASSERT_EQ(run(mpirun(ranks) + base + path + " --threads " + std::to_string(threads), &out), 0)
         << out;
     EXPECT_TRUE(readBytes(path) == expected) << ranks << " ranks";
