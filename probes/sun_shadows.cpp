@@ -9,7 +9,11 @@
 // points nearest the split (in two rounds); fit the line through those edge points in the
 // plane perpendicular to the light; choose the ramp's width; and keep the ramp only if at
 // most kMaxWrongPoints of the 64 interior points (32 of them fresh) disagree with it and it
-// is clearly closer to the light's share than the plain blend of the probes' shares.
+// is clearly closer to the light's share than the plain blend of the probes' shares. When no
+// plane passes (two edges cross the cell, or a probe stands in a pocket of shade at a corner
+// of a lit cell), the linear share fitted to the interior points by least squares is tried
+// under the same rules: in a lit cell whose probes sit in pockets of shade it is the
+// constant 1, which the plain blend (darkened by those probes' weights) is not.
 #include "probes/sun_shadows.h"
 
 #include <algorithm>
@@ -88,9 +92,14 @@ class RampFit {
     // exact.
     if (!sharesDiffer()) return none;
     searchSplit();
-    if (!fitEdge()) return none;
-    const vec4 candidate = rampWithBestWidth();
-    return validate(candidate) ? candidate : none;
+    if (fitEdge()) {
+      const vec4 candidate = rampWithBestWidth();
+      if (validate(candidate)) return candidate;
+    }
+    // No one plane bounds the shadow in the cell (two edges, a probe in a pocket of shade at
+    // a corner): the linear share that fits the interior points best, kept by the same rules.
+    const vec4 flat = leastSquaresRamp();
+    return !std::isnan(flat.x) && validate(flat) ? flat : none;
   }
 
  private:
@@ -275,6 +284,36 @@ class RampFit {
       fitPlane();
     }
     return true;
+  }
+
+  // The linear function of the barycentric coordinates closest (least squares) to the
+  // interior points' shares, fitted again without the points it misses by more than
+  // kMaxPointError (a few points in a pocket of shade would otherwise tilt it across the
+  // whole cell; validation still counts them): its values at the four vertices, or NaN. The
+  // probes' own shares are left out: they are what the plain blend already uses.
+  vec4 leastSquaresRamp() const {
+    const vec4 none(std::numeric_limits<float>::quiet_NaN());
+    std::vector<uint8_t> use(kSunRampSamples, 1);
+    vec4 ramp = none;
+    for (int round = 0; round < 2; ++round) {
+      glm::dmat4 a(0.0);
+      glm::dvec4 y(0.0);
+      for (size_t j = 0; j < kSunRampSamples; ++j) {
+        if (!use[j]) continue;
+        const glm::dvec4 b(train_[j].b[0], train_[j].b[1], train_[j].b[2], train_[j].b[3]);
+        a += glm::outerProduct(b, b);
+        y += b * double(train_[j].share);
+      }
+      // Points near one face only (a few left) leave the fit undetermined.
+      if (!(std::abs(glm::determinant(a)) > 1e-9)) return round == 0 ? none : ramp;
+      ramp = vec4(glm::inverse(a) * y);
+      for (size_t j = 0; j < kSunRampSamples; ++j) {
+        const Sample& x = train_[j];
+        const float r = x.b[0] * ramp.x + x.b[1] * ramp.y + x.b[2] * ramp.z + x.b[3] * ramp.w;
+        use[j] = std::abs(std::clamp(r, 0.0f, 1.0f) - x.share) <= kMaxPointError;
+      }
+    }
+    return ramp;
   }
 
   // The ramp across the plane with the width of kWidths that fits the points best (a hard

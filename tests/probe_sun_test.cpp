@@ -9,6 +9,7 @@
 // boundary is the plane through the roof's top edge {x = 0, y = 3.2} that contains t.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -145,6 +146,70 @@ TEST(ProbeSun, NoRampInFullSunOrUnderStripes) {
     ramps += std::isnan(fitSunRamp(striped, 0, t, s, uint64_t(i)).x) ? 0 : 1;
   }
   EXPECT_EQ(ramps, 0);
+}
+
+// Two of a cell's probes stand in small pockets of shade (columns under two small slabs, the
+// sun overhead) while the cell around them is lit: no one plane bounds that shade, and the
+// plain blend darkens the whole cell by those probes' weights. The cell gets the linear share
+// that fits its interior (here the constant 1): lit at every point outside the pockets.
+TEST(ProbeSun, ProbesInPocketsOfShadeDoNotDarkenTheirCell) {
+  Scene scene;
+  const uint32_t grey = test::addMaterial(scene, test::lambert(vec3(0.5f)));
+  test::addQuad(scene, "ground", vec3(-30, 0, 30), vec3(30, 0, 30), vec3(30, 0, -30),
+                vec3(-30, 0, -30), grey);
+  const std::array<vec3, 4> t = tetrahedron(vec3(0.0f, 1.5f, 0.0f), 1.2f);
+  // The pockets: columns over the two lower vertices, whose edge (level) projects along the
+  // light onto a diagonal through the middle of the cell's shadow: a plane along the light
+  // that cut both pockets off would cut the cell in two.
+  std::array<int, 4> byHeight = {0, 1, 2, 3};
+  std::sort(byHeight.begin(), byHeight.end(),
+            [&](int a, int b) { return t[size_t(a)].y < t[size_t(b)].y; });
+  const std::array<int, 2> pockets = {byHeight[0], byHeight[1]};
+  ASSERT_NEAR(t[size_t(pockets[0])].y, t[size_t(pockets[1])].y, 1e-5f);
+  constexpr float kPocket = 0.08f;  // half the side of each square column of shade
+  for (int k : pockets) {
+    const vec3 v = t[size_t(k)];
+    test::addBox(scene, "slab" + std::to_string(k), vec3(v.x - kPocket, 3.0f, v.z - kPocket),
+                 vec3(v.x + kPocket, 3.05f, v.z + kPocket), grey, false);
+  }
+  scene.lights.push_back(test::directionalLight(vec3(0.0f, -1.0f, 0.0f), kSunLux));
+  scene.updateBounds();
+  const std::unique_ptr<Tracer> tracer = std::move(Tracer::create(scene)).value();
+  const Integrator in(scene, *tracer, probeIntegratorSettings(scene, ProbeBakeSettings{}));
+  const std::array<float, 4> shares = sharesOf(in, t);
+  for (int k = 0; k < 4; ++k)
+    ASSERT_EQ(shares[size_t(k)], k == pockets[0] || k == pockets[1] ? 0.0f : 1.0f) << k;
+  const vec4 a = fitSunRamp(in, 0, t, shares, 21);
+  ASSERT_FALSE(std::isnan(a.x)) << "the cell gets a ramp";
+  auto inPocket = [&](vec3 p) {
+    for (int k : pockets)
+      if (std::abs(p.x - t[size_t(k)].x) < kPocket + 0.02f &&
+          std::abs(p.z - t[size_t(k)].z) < kPocket + 0.02f)
+        return true;
+    return false;
+  };
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int checked = 0;
+  double plainError = 0.0;
+  for (int i = 0; i < 2000; ++i) {
+    float b[4], sum = 0.0f;
+    for (float& x : b) sum += (x = -std::log(1.0f - u(rng)));
+    vec3 p(0.0f);
+    float r = 0.0f, plain = 0.0f;
+    for (int k = 0; k < 4; ++k) {
+      p += b[k] / sum * t[size_t(k)];
+      r += b[k] / sum * a[k];
+      plain += b[k] / sum * shares[size_t(k)];
+    }
+    if (inPocket(p)) continue;
+    ++checked;
+    EXPECT_EQ(sunShare(in, 0, p, uint64_t(i)), 1.0f);  // lit, as the tracer says
+    EXPECT_GE(std::clamp(r, 0.0f, 1.0f), 0.97f) << p.x << " " << p.y << " " << p.z;
+    plainError += 1.0 - plain;
+  }
+  EXPECT_GT(checked, 1900);
+  EXPECT_GT(plainError / checked, 0.4) << "the plain blend darkens the cell";
 }
 
 // Through the bake and the blend: points beside the edge, where a cell's probes on both sides
