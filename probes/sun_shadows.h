@@ -28,11 +28,12 @@ float sunShare(const Integrator& integrator, uint32_t light, glm::vec3 q, uint64
 inline constexpr uint32_t kSunRampSamples = 32;
 
 // The ramp of tetrahedron `corners` (positively oriented) whose probes hold the light's
-// shares `shares` (ProbeSunLayer::ramps): its value at the four vertices, or NaN (all four)
-// when the light's share does not vary in the cell, when the best ramp is wrong at more than
-// 3 of 64 interior points (two edges, stripes), or when the plain blend (the shares mixed by
-// barycentric weights) fits the share about as well. Samples the cell with `key`
-// (deterministic).
+// shares `shares` (ProbeSunLayer::ramps): its value at the four vertices: the step across
+// the shadow's plane, or where no plane passes the linear share fitted to the interior points
+// (a lit cell whose probes stand in pockets of shade). NaN (all four) when the light's share
+// does not vary in the cell, when both are wrong at more than 3 of 64 interior points (two
+// edges at an angle, stripes), or when the plain blend (the shares mixed by barycentric
+// weights) fits the share about as well. Samples the cell with `key` (deterministic).
 glm::vec4 fitSunRamp(const Integrator& integrator, uint32_t light,
                      const std::array<glm::vec3, 4>& corners, const std::array<float, 4>& shares,
                      uint64_t key);
