@@ -59,6 +59,11 @@ vec3 pointOf(const std::array<vec3, 4>& c, const std::array<float, 4>& b) {
   return b[0] * c[0] + b[1] * c[1] + b[2] * c[2] + b[3] * c[3];
 }
 
+// Per-vertex values (a ramp's, the probes' shares) mixed by barycentric weights b.
+float mixOf(const std::array<float, 4>& b, const vec4& v) {
+  return b[0] * v[0] + b[1] * v[1] + b[2] * v[2] + b[3] * v[3];
+}
+
 struct Sample {
   std::array<float, 4> b;  // barycentric in the cell
   vec3 p;
@@ -308,9 +313,8 @@ class RampFit {
       if (!(std::abs(glm::determinant(a)) > 1e-9)) return round == 0 ? none : ramp;
       ramp = vec4(glm::inverse(a) * y);
       for (size_t j = 0; j < kSunRampSamples; ++j) {
-        const Sample& x = train_[j];
-        const float r = x.b[0] * ramp.x + x.b[1] * ramp.y + x.b[2] * ramp.z + x.b[3] * ramp.w;
-        use[j] = std::abs(std::clamp(r, 0.0f, 1.0f) - x.share) <= kMaxPointError;
+        const float r = std::clamp(mixOf(train_[j].b, ramp), 0.0f, 1.0f);
+        use[j] = std::abs(r - train_[j].share) <= kMaxPointError;
       }
     }
     return ramp;
@@ -343,12 +347,10 @@ class RampFit {
   // shade an object there fully wrong), and clearly closer to the light's share than the
   // plain blend at the fresh ones. A point inside the ramp's band (its value strictly
   // between 0 and 1) is judged more loosely: its share depends on where in the penumbra it
-  // stands.
-  bool validate(const vec4& ramp) const {
-    auto rampAt = [&](const Sample& x) {
-      return std::clamp(x.b[0] * ramp.x + x.b[1] * ramp.y + x.b[2] * ramp.z + x.b[3] * ramp.w,
-                        0.0f, 1.0f);
-    };
+  // stands. The fresh points are drawn once per cell: a plane ramp and the least-squares
+  // one are judged at the same points.
+  bool validate(const vec4& ramp) {
+    auto rampAt = [&](const Sample& x) { return std::clamp(mixOf(x.b, ramp), 0.0f, 1.0f); };
     auto wrong = [&](const Sample& x) {
       const float r = rampAt(x);
       const bool inBand = r > 0.0f && r < 1.0f;
@@ -358,11 +360,12 @@ class RampFit {
     for (size_t j = 0; j < kSunRampSamples; ++j)  // the interior points (not the probes)
       wrongPoints += wrong(train_[j]) ? 1 : 0;
     float rampError = 0.0f, blendError = 0.0f;
-    for (const Sample& x : draw(kSunRampSamples)) {
+    if (fresh_.empty()) fresh_ = draw(kSunRampSamples);
+    const vec4 probeShares(shares_[0], shares_[1], shares_[2], shares_[3]);
+    for (const Sample& x : fresh_) {
       wrongPoints += wrong(x) ? 1 : 0;
       if (wrongPoints > kMaxWrongPoints) return false;
-      const float plain = x.b[0] * shares_[0] + x.b[1] * shares_[1] + x.b[2] * shares_[2] +
-                          x.b[3] * shares_[3];
+      const float plain = mixOf(x.b, probeShares);
       rampError += std::abs(rampAt(x) - x.share);
       blendError += std::abs(plain - x.share);
     }
@@ -378,6 +381,7 @@ class RampFit {
   float extent_ = 0.0f;  // the cell's longest edge
   uint64_t probeKey_;    // keys the bisections' shadow rays
   std::vector<Sample> train_;
+  std::vector<Sample> fresh_;  // validation's fresh interior points, once drawn
   vec3 normal_{0.0f};
   float offset_ = 0.0f;
   std::vector<vec3> edge_;
