@@ -80,6 +80,25 @@ class MpiTest : public ::testing::Test {
     return test::runCommand(command, output);
   }
 
+  // Runs `bake` (a command line ending in --out) into `one` (dir/stem_one.kprobe) with one
+  // process and 2 threads, then with 2 ranks x 1 thread and 3 ranks x 2 threads, and expects
+  // the same bytes each time.
+  void expectSameProbeFileOnRanks(const std::string& bake, const std::string& stem,
+                                  std::string* one) {
+    std::string out;
+    *one = dir + "/" + stem + "_one.kprobe";
+    ASSERT_EQ(run(bake + *one + " --threads 2", &out), 0) << out;
+    const std::string expected = readBytes(*one);
+    ASSERT_FALSE(expected.empty());
+    for (auto [ranks, threads] : {std::pair{2, 1}, {3, 2}}) {
+      const std::string path = dir + "/" + stem + "_split" + std::to_string(ranks) + ".kprobe";
+      ASSERT_EQ(run(mpirun(ranks) + bake + path + " --threads " + std::to_string(threads), &out),
+                0)
+          << out;
+      EXPECT_TRUE(readBytes(path) == expected) << stem << ", " << ranks << " ranks";
+    }
+  }
+
   std::string dir, scene;
 };
 
@@ -155,39 +174,25 @@ TEST_F(MpiTest, ProgressIsTheWholeJobsOnRankZero) {
 // The scene's probe group baked with occlusion (shadowmask) and visibility maps: the .kprobe
 // of 2 and 3 ranks equals one process's.
 TEST_F(MpiTest, ProbeFileByteIdenticalToOneProcess) {
-  const std::string base = std::string(test::kilnExe()) + " probes bake " + scene +
-                           " --rays 256 --lighting-mode shadowmask -q --out ";
-  std::string out;
-  ASSERT_EQ(run(base + dir + "/one.kprobe --threads 2", &out), 0) << out;
-  const std::string expected = readBytes(dir + "/one.kprobe");
-  ASSERT_FALSE(expected.empty());
-  for (auto [ranks, threads] : {std::pair{2, 1}, {3, 2}}) {
-    const std::string path = dir + "/split" + std::to_string(ranks) + ".kprobe";
-    ASSERT_EQ(run(mpirun(ranks) + base + path + " --threads " + std::to_string(threads), &out), 0)
-        << out;
-    EXPECT_TRUE(readBytes(path) == expected) << ranks << " ranks";
-  }
+  std::string one;
+  expectSameProbeFileOnRanks(std::string(test::kilnExe()) + " probes bake " + scene +
+                                 " --rays 256 --lighting-mode shadowmask -q --out ",
+                             "mixed", &one);
 }
 
 // two_rooms as shipped (its sun baked): the sun layer's ramps, their cells dealt across the
 // ranks, give the .kprobe of one process.
 TEST_F(MpiTest, SunRampsByteIdenticalToOneProcess) {
-  const std::string base = std::string(test::kilnExe()) + " probes bake " + test::scenesDir() +
-                           "/two_rooms.gltf --rays 256 -q --out ";
-  std::string out;
-  ASSERT_EQ(run(base + dir + "/sun_one.kprobe --threads 2", &out), 0) << out;
-  const std::string expected = readBytes(dir + "/sun_one.kprobe");
-  Result<ProbeSet> one = loadProbeFile(dir + "/sun_one.kprobe");
+  std::string path;
+  expectSameProbeFileOnRanks(std::string(test::kilnExe()) + " probes bake " + test::scenesDir() +
+                                 "/two_rooms.gltf --rays 256 -q --out ",
+                             "sun", &path);
+  if (HasFatalFailure()) return;
+  Result<ProbeSet> one = loadProbeFile(path);
   ASSERT_TRUE(bool(one)) << one.error();
   size_t ramps = 0;
   for (const glm::vec4& r : one->sun.ramps) ramps += std::isnan(r.x) ? 0 : 1;
   ASSERT_GT(ramps, 0u) << "the test needs cells with a ramp";
-  for (auto [ranks, threads] : {std::pair{2, 1}, {3, 2}}) {
-    const std::string path = dir + "/sun_split" + std::to_string(ranks) + ".kprobe";
-    ASSERT_EQ(run(mpirun(ranks) + base + path + " --threads " + std::to_string(threads), &out), 0)
-        << out;
-    EXPECT_TRUE(readBytes(path) == expected) << ranks << " ranks";
-  }
 }
 
 // Placement (its cheap bakes split across ranks, every rank placing from all of them): the
