@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 
+#include "probes/sun_shadows.h"
 #include "src/parallel.h"
 #include "src/sampling.h"
 
@@ -150,6 +151,58 @@ Result<FieldError> PlacementEvaluation::noise(const ProbeBakeSettings& truthBake
   std::vector<float> errors(truth_.points.size());
   for (size_t i = 0; i < errors.size(); ++i)
     errors[i] = relativeIrradianceError(truth_.sh[i], rebaked[i], truth_.floor);
+  return summarizeFieldError(std::move(errors));
+}
+
+std::vector<float> PlacementEvaluation::sunShares(const std::atomic<bool>* cancel) const {
+  const Integrator integrator(scene_, tracer_, probeIntegratorSettings(scene_, bake_));
+  const int32_t light = sunLayerLight(scene_, integrator.settings());
+  if (light < 0) return {};
+  std::vector<float> out(truth_.points.size(), 0.0f);
+  ParallelOptions options;
+  options.threads = bake_.threads;
+  options.grain = 64;
+  options.cancel = cancel;
+  parallelFor(
+      out.size(),
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i)
+          out[i] = sunShare(integrator, uint32_t(light), truth_.points[i],
+                            positionKey(truth_.points[i]));
+      },
+      options);
+  if (cancel && cancel->load()) return {};
+  return out;
+}
+
+FieldError PlacementEvaluation::measureWithExactSunShares(const ProbeSet& set,
+                                                          std::span<const float> shares) const {
+  ProbeSet layerless = set;
+  layerless.sun.ramps.clear();  // the blend without ramps; the shares are added below
+  std::vector<float> errors(truth_.points.size(), 0.0f);
+  ParallelOptions options;
+  options.threads = bake_.threads;
+  options.grain = 64;
+  parallelFor(
+      errors.size(),
+      [&](size_t begin, size_t end) {
+        int32_t hint = -1;
+        for (size_t i = begin; i < end; ++i) {
+          const ProbeLocation loc = locateProbe(layerless, truth_.points[i], hint);
+          hint = loc.cell;
+          ShL2Rgb estimate = interpolateProbes(layerless, loc);
+          if (!layerless.sun.empty() && i < shares.size() && loc.cell >= 0 &&
+              !layerless.isOuter(loc.cell)) {
+            float mixed = 0.0f;
+            for (int k = 0; k < 4; ++k)
+              mixed += loc.weights[k] * layerless.sun.visibility[size_t(loc.probes[k])];
+            for (int c = 0; c < kShL2Count; ++c)
+              estimate.c[c] += (shares[i] - mixed) * layerless.sun.sh.c[c];
+          }
+          errors[i] = relativeIrradianceError(truth_.sh[i], estimate, truth_.floor);
+        }
+      },
+      options);
   return summarizeFieldError(std::move(errors));
 }
 

@@ -17,7 +17,9 @@
 #include <vector>
 
 #include "kiln/probe_runtime.h"
+#include "probes/placement_evaluation.h"
 #include "probes/probe_baker.h"
+#include "probes/probe_placement.h"
 #include "probes/sun_shadows.h"
 #include "src/sh_projection.h"
 #include "tests/test_util.h"
@@ -266,6 +268,73 @@ TEST(ProbeSun, BlendMatchesTheCentreBakeBesideTheEdge) {
             << worstPlain << " plain\n";
   EXPECT_LT(worstLayer, 1.3f);
   EXPECT_GT(worstPlain, 2.0f);
+}
+
+// compare-placement --exact-sun (PlacementEvaluation::measureWithExactSunShares): the bound a
+// perfect layer would give. Under slats 15 cm apart the light falls in stripes no ramp fits
+// (NoRampInFullSunOrUnderStripes) and no probe 0.8 m from the next resolves, so the layer's
+// blend gives every point about the stripes' mean; with each point's exact share in its
+// place, only the bounced light is left to interpolate. Where a point and all four of its
+// probes are in full sun, the exact share is the probes' share and nothing changes.
+// Measured: 57 points under the slats, mean error 0.74 with the layer and 0.027 with exact
+// shares; 45 points in full sun.
+TEST(ProbeSun, ExactSharesBoundWhatALayerCouldGive) {
+  const SunWorld slats(0.15f);
+  std::vector<vec3> grid;
+  for (int x = 0; x <= 9; ++x)
+    for (int y = 0; y <= 2; ++y)
+      for (int z = -1; z <= 1; ++z)
+        grid.push_back(vec3(-4.0f + 0.8f * float(x), 0.4f + 1.0f * float(y), 0.8f * float(z)));
+  ProbeBakeSettings bake;  // visibility maps: the layer applies to the visibility blend
+  bake.rays = 1024;
+  TruthPoints truth;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> ux(-3.5f, 3.0f), uy(0.5f, 2.3f), uz(-0.7f, 0.7f);
+  for (int i = 0; i < 200; ++i) truth.points.push_back(vec3(ux(rng), uy(rng), uz(rng)));
+  ProbeBakeSettings truthBake = bake;
+  truthBake.seed = 99;
+  truth.sh = bakePointSh(slats.scene, *slats.tracer, truth.points, truthBake);
+  ASSERT_EQ(truth.sh.size(), truth.points.size());
+  truth.floor = 0.02f * kSunLux;
+  const PlacementEvaluation evaluation(slats.scene, *slats.tracer, truth, bake);
+  Result<ProbeSet> set = evaluation.bake(grid);
+  ASSERT_TRUE(bool(set)) << set.error();
+  ASSERT_EQ(set->sun.light, 0);
+  const std::vector<float> shares = evaluation.sunShares();
+  ASSERT_EQ(shares.size(), truth.points.size());
+  const FieldError layer = evaluation.measure(*set).visibility;
+  const FieldError exact = evaluation.measureWithExactSunShares(*set, shares);
+  double striped = 0.0, stripedExact = 0.0;
+  int stripedPoints = 0, litPoints = 0;
+  for (size_t i = 0; i < truth.points.size(); ++i) {
+    const ProbeLocation loc = locateProbe(*set, truth.points[i]);
+    ASSERT_GE(loc.cell, 0);
+    bool allLit = shares[i] == 1.0f;
+    bool mixed = false;
+    for (int k = 0; k < 4; ++k) {
+      const float v = set->sun.visibility[size_t(loc.probes[k])];
+      allLit = allLit && v == 1.0f;
+      mixed = mixed || (v > 0.1f && v < 0.9f);
+    }
+    if (allLit) {
+      ++litPoints;
+      // (The weights sum to 1 up to float rounding, so the share added is 1 - (1 +- eps).)
+      EXPECT_NEAR(exact.perPoint[i], layer.perPoint[i], 1e-5f) << i;
+    } else if (mixed && truth.points[i].x < -1.0f) {
+      ++stripedPoints;
+      striped += layer.perPoint[i];
+      stripedExact += exact.perPoint[i];
+    }
+  }
+  ASSERT_GE(litPoints, 20);
+  ASSERT_GE(stripedPoints, 40);
+  striped /= stripedPoints;
+  stripedExact /= stripedPoints;
+  std::cout << stripedPoints << " points under the slats: mean error " << striped
+            << " with the layer, " << stripedExact << " with exact shares; " << litPoints
+            << " in full sun\n";
+  EXPECT_GT(striped, 0.5);
+  EXPECT_LT(stripedExact, 0.2);
 }
 
 // Ramps are a function of the cell and the seed alone: the same bits on 1 and 2 threads.

@@ -296,6 +296,7 @@ struct CompareOptions {
   int evalRays = 4096;
   int objectPoints = 0;  // points where objects stand, for the sphere measure (0 = off)
   std::optional<uint64_t> evalSeed;  // default: derived from --seed
+  bool exactSun = false;  // also measure every set with the exact sun share (a bound)
   std::string csv, pointsCsv;
 };
 
@@ -308,13 +309,14 @@ struct Row {
   float nearWallPlain = 0.0f;
   CellCrossing crossing;
   std::optional<SphereError> spheres;  // at the object points (--object-points)
+  std::optional<FieldError> exactSun;  // the sun layer replaced by exact shares (--exact-sun)
   double seconds = 0.0;
 };
 
-// The fewest probes of an automatic row whose mean (visibility-weighted or plain) is at most
+// The fewest probes of an automatic row whose mean (as `mean` reads it off a row) is at most
 // the grid's; 0 = none.
-size_t countToMatch(const std::vector<Row>& rows, const Row& grid, bool visibility) {
-  auto mean = [&](const Row& r) { return visibility ? r.error.mean : r.plain.mean; };
+size_t countToMatch(const std::vector<Row>& rows, const Row& grid,
+                    const std::function<float(const Row&)>& mean) {
   size_t needed = 0;
   for (const Row& r : rows)
     if (r.method.rfind("automatic", 0) == 0 && mean(r) <= mean(grid) &&
@@ -416,6 +418,14 @@ int runCompare(const CompareOptions& o) {
     return n;
   }();
   if (!noise || cancelFlag().load()) return reportInterrupted("outputs");
+  std::vector<float> exactShares;
+  if (o.exactSun) {
+    exactShares = evaluation.sunShares(&cancelFlag());
+    if (cancelFlag().load()) return reportInterrupted("outputs");
+    if (exactShares.empty())
+      printWarning(o.common.scene + ": --exact-sun: the probes bake no directional light with "
+                   "shadows, so there is no sun layer to replace");
+  }
   auto evaluate = [&](const std::string& method, const std::vector<vec3>& positions,
                       double seconds) -> std::optional<Row> {
     Result<ProbeSet> set = evaluation.bake(positions, &cancelFlag());
@@ -434,6 +444,7 @@ int runCompare(const CompareOptions& o) {
     row.nearWallPlain = e.nearWallPlain;
     row.crossing = e.crossing;
     row.seconds = seconds;
+    if (!exactShares.empty()) row.exactSun = evaluation.measureWithExactSunShares(*set, exactShares);
     return row;
   };
 
@@ -443,6 +454,7 @@ int runCompare(const CompareOptions& o) {
     r.method = "noise (rebake)";
     r.error = r.plain = *noise;
     r.nearWall = r.nearWallPlain = evaluation.nearWallMean(noise->perPoint);
+    if (!exactShares.empty()) r.exactSun = *noise;
     rows.push_back(std::move(r));
   }
   // A baseline at the same count: placed (timed), baked and measured.
@@ -515,11 +527,12 @@ int runCompare(const CompareOptions& o) {
           << std::setw(11) << "near-wall";
   table << std::setw(14) << "crossing-tets" << std::setw(10) << "seconds";
   if (objectTruth) table << std::setw(11) << "sphere-med" << std::setw(11) << "sphere-x";
+  if (!exactShares.empty()) table << std::setw(11) << "exact-sun";
   table << "\n";
   std::ostringstream csv;
   csv << "scene,method,probes,mean,p95,max,near_wall_mean,plain_mean,plain_p95,plain_max,"
          "plain_near_wall_mean,crossing_cells,inner_cells,seconds,sphere_median,"
-         "sphere_worst_ratio\n";
+         "sphere_worst_ratio,exact_sun_mean\n";
   for (const Row& r : rows) {
     table << std::left << std::setw(20) << r.method << std::right << std::setw(7) << r.count
           << std::fixed << std::setprecision(4);
@@ -536,6 +549,7 @@ int runCompare(const CompareOptions& o) {
       if (r.spheres->worstRatio > 1e6f) table << ">1e6";
       else table << r.spheres->worstRatio;
     }
+    if (r.exactSun) table << std::setprecision(4) << std::setw(11) << r.exactSun->mean;
     table << "\n";
     csv << std::filesystem::path(o.common.scene).filename().string() << "," << r.method << ","
         << r.count << "," << r.error.mean << "," << r.error.p95 << "," << r.error.max << ","
@@ -544,13 +558,22 @@ int runCompare(const CompareOptions& o) {
         << "," << r.seconds << ",";
     if (r.spheres) csv << r.spheres->median << "," << r.spheres->worstRatio;
     else csv << ",";
+    csv << ",";
+    if (r.exactSun) csv << r.exactSun->mean;
     csv << "\n";
   }
-  // The fewest automatic probes that reach the grid's error at its count, per blend.
-  for (bool visibility : {true, false}) {
-    const size_t needed = countToMatch(rows, *gridRow, visibility);
-    const float gridMean = visibility ? gridRow->error.mean : gridRow->plain.mean;
-    table << (visibility ? "visibility-weighted: " : "plain: ");
+  // The fewest automatic probes that reach the grid's error at its count, per blend (and with
+  // exact sun shares, when measured).
+  std::vector<std::pair<std::string, std::function<float(const Row&)>>> measures = {
+      {"visibility-weighted: ", [](const Row& r) { return r.error.mean; }},
+      {"plain: ", [](const Row& r) { return r.plain.mean; }}};
+  if (!exactShares.empty())
+    measures.push_back({"visibility-weighted, exact sun shares: ",
+                        [](const Row& r) { return r.exactSun ? r.exactSun->mean : kInfinity; }});
+  for (const auto& [label, mean] : measures) {
+    const size_t needed = countToMatch(rows, *gridRow, mean);
+    const float gridMean = mean(*gridRow);
+    table << label;
     if (needed) {
       table << "automatic placement reaches the grid's mean error (" << std::setprecision(4)
             << gridMean << " at " << gridRow->count << " probes) with " << needed
@@ -637,6 +660,10 @@ void registerProbesPlaceCommand(CLI::App& probes) {
                 "centres: median relative error and worst ratio of mean irradiance (0 = off)")
       ->check(CLI::Range(0, 1 << 20))
       ->capture_default_str();
+  c->add_flag("--exact-sun", compare->exactSun,
+             "Also measure every set with its sun layer's ramps replaced by the exact share of "
+             "the light at each point (a bound on what a better layer could give, not a "
+             "method; column exact-sun)");
   c->add_option("--eval-seed", compare->evalSeed,
                 "Seed of the evaluation points and their truth (default: --seed)");
   c->add_option("--csv", compare->csv,
