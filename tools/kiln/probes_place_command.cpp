@@ -593,6 +593,8 @@ int runCompare(const CompareOptions& o) {
     pc << "x,y,z,near_wall,truth_rms";
     for (const Row& r : rows) pc << "," << r.method << " " << r.count;
     for (const Row& r : rows) pc << "," << r.method << " " << r.count << " plain";
+    for (const Row& r : rows)
+      if (r.exactSun) pc << "," << r.method << " " << r.count << " exact sun";
     pc << "\n";
     pc << std::setprecision(6);
     for (size_t i = 0; i < points.size(); ++i) {
@@ -600,6 +602,8 @@ int runCompare(const CompareOptions& o) {
          << int(evaluation.nearWall()[i]) << "," << irradianceRms(truth->sh[i]);
       for (const Row& r : rows) pc << "," << r.error.perPoint[i];
       for (const Row& r : rows) pc << "," << r.plain.perPoint[i];
+      for (const Row& r : rows)
+        if (r.exactSun) pc << "," << r.exactSun->perPoint[i];
       pc << "\n";
     }
     if (Status s = writeTextFileAtomically(o.pointsCsv, pc.str()); !s) {
@@ -674,7 +678,8 @@ void registerProbesPlaceCommand(CLI::App& probes) {
                 "plain_* without)");
   c->add_option("--points-csv", compare->pointsCsv,
                 "Also write every evaluation point's error per method as CSV (a column per "
-                "method with visibility, then one per method with the plain blend)");
+                "method with visibility, then one per method with the plain blend, then with "
+                "--exact-sun one per method with exact sun shares)");
   c->callback(commandCallback([compare]() { return runCompare(*compare); }));
 }
 
