@@ -191,8 +191,9 @@ FieldError PlacementEvaluation::measureWithExactSunShares(const ProbeSet& set,
           const ProbeLocation loc = locateProbe(layerless, truth_.points[i], hint);
           hint = loc.cell;
           ShL2Rgb estimate = interpolateProbes(layerless, loc);
+          // Where the runtime applies a layer: visibility-weighted blends in inner cells.
           if (!layerless.sun.empty() && i < shares.size() && loc.cell >= 0 &&
-              !layerless.isOuter(loc.cell)) {
+              loc.visibilityWeighted && !layerless.isOuter(loc.cell)) {
             float mixed = 0.0f;
             for (int k = 0; k < 4; ++k)
               mixed += loc.weights[k] * layerless.sun.visibility[size_t(loc.probes[k])];

@@ -112,8 +112,9 @@ class PlacementEvaluation {
   // the sun layer's light (sunLayerLight of the bake's integrator) reaching each truth point
   // (sunShare, keyed by the point's position); empty when the bake has no such light. Then
   // the set's error with the visibility-weighted blend when its ramps are replaced by those
-  // exact shares: sh += (share - sum_k w_k v_k) x the light's SH at every point inside the
-  // hull (outer cells blend as the runtime does), as if the layer were perfect.
+  // exact shares: sh += (share - sum_k w_k v_k) x the light's SH wherever the runtime applies
+  // a layer (visibility-weighted blends in inner cells; elsewhere the blend is the runtime's),
+  // as if the layer were perfect.
   std::vector<float> sunShares(const std::atomic<bool>* cancel = nullptr) const;
   FieldError measureWithExactSunShares(const ProbeSet& set, std::span<const float> shares) const;
   const std::vector<uint8_t>& nearWall() const { return nearWall_; }
