@@ -444,7 +444,8 @@ int runCompare(const CompareOptions& o) {
     row.nearWallPlain = e.nearWallPlain;
     row.crossing = e.crossing;
     row.seconds = seconds;
-    if (!exactShares.empty()) row.exactSun = evaluation.measureWithExactSunShares(*set, exactShares);
+    if (!exactShares.empty())
+      row.exactSun = evaluation.measureWithExactSunShares(*set, exactShares);
     return row;
   };
 
