@@ -676,7 +676,8 @@ void registerProbesPlaceCommand(CLI::App& probes) {
                 "Seed of the evaluation points and their truth (default: --seed)");
   c->add_option("--csv", compare->csv,
                 "Also write the table as CSV (mean, p95, max, near_wall_mean with visibility; "
-                "plain_* without)");
+                "plain_* without; sphere_* with --object-points, exact_sun_mean with "
+                "--exact-sun)");
   c->add_option("--points-csv", compare->pointsCsv,
                 "Also write every evaluation point's error per method as CSV (a column per "
                 "method with visibility, then one per method with the plain blend, then with "
